@@ -1,0 +1,830 @@
+//! Patch blob codec (layout in `docs/FORMAT.md`).
+//!
+//! - Connectivity: meshoptimizer's index codec, vertices in first-use order.
+//! - Positions on the model-wide integer grid and original vertex IDs: parallelogram
+//!   prediction along the triangle order (Touma–Gotsman), zigzag LEB128 residuals. Vertices
+//!   on the patch border keep full grid precision, so a vertex shared by two patches (possibly
+//!   at different levels) decodes to identical coordinates and cuts stay watertight; interior
+//!   vertices of coarse patches are stored at a coarser step (`2^shift` grid units) chosen
+//!   from the node's error, as Nexus quantises by a fraction of the node error.
+//! - Colours: YCoCg with 6 bits (meshoptimizer's colour filter + vertex codec; a predicted
+//!   scheme was measured and saved only ~3%).
+//! - Normals: the decoder computes every normal from the patch's triangles (area-weighted,
+//!   exactly in f64 from the integer grid coordinates, so every decoder in every language
+//!   gets the same bits); border vertices additionally store the difference between their
+//!   scan normal and that prediction in octahedral coordinates (8 bits), so shading matches
+//!   across patch borders while interior normals follow the geometry at that level.
+//! - The whole payload is compressed with zstd.
+
+use meshopt::{
+    decode_index_buffer, decode_vertex_buffer, encode_index_buffer, encode_vertex_buffer,
+};
+use std::collections::HashMap;
+
+/// Blob magic, first 4 bytes.
+pub const BLOB_MAGIC: [u8; 4] = *b"MWP2";
+const COMPRESSION_NONE: u8 = 0;
+const COMPRESSION_ZSTD: u8 = 1;
+const FLAG_COLORS: u32 = 1;
+const FLAG_NORMALS: u32 = 2;
+const PAYLOAD_HEADER: usize = 52;
+/// Octahedral normal quantisation: components in `-OCT_SCALE..=OCT_SCALE` (8 bits).
+pub const OCT_SCALE: f64 = 127.0;
+/// Bits per channel of YCoCg colours (meshoptimizer's colour filter).
+pub const COLOR_BITS: i32 = 6;
+/// Octahedral coordinates of a unit vector, rounded with `floor(x + 0.5)` (the same in every
+/// language).
+pub fn oct_encode(n: [f64; 3]) -> [i64; 2] {
+    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+    if !(l1 > 0.0) {
+        return [0, 0];
+    }
+    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
+    if n[2] < 0.0 {
+        let (ax, ay) = (x.abs(), y.abs());
+        x = (1.0 - ay) * if x >= 0.0 { 1.0 } else { -1.0 };
+        y = (1.0 - ax) * if y >= 0.0 { 1.0 } else { -1.0 };
+    }
+    [
+        (x * OCT_SCALE + 0.5).floor() as i64,
+        (y * OCT_SCALE + 0.5).floor() as i64,
+    ]
+}
+
+/// Unit vector of octahedral coordinates.
+pub fn oct_decode(q: [i64; 2]) -> [f32; 3] {
+    let (x, y) = (
+        q[0].clamp(-127, 127) as f64 / OCT_SCALE,
+        q[1].clamp(-127, 127) as f64 / OCT_SCALE,
+    );
+    let z = 1.0 - x.abs() - y.abs();
+    let (x, y) = if z < 0.0 {
+        (
+            (1.0 - y.abs()) * if x >= 0.0 { 1.0 } else { -1.0 },
+            (1.0 - x.abs()) * if y >= 0.0 { 1.0 } else { -1.0 },
+        )
+    } else {
+        (x, y)
+    };
+    let len = (x * x + y * y + z * z).sqrt();
+    [(x / len) as f32, (y / len) as f32, (z / len) as f32]
+}
+
+/// Area-weighted vertex normals from integer grid coordinates, in f64. Cross products of
+/// integer vectors below 2^26 are exact, and the summation order is the triangle order, so
+/// the result is bit-identical in any IEEE-754 implementation that follows this order.
+pub fn grid_normals(positions: &[[i64; 3]], indices: &[u32]) -> Vec<[f64; 3]> {
+    let mut acc = vec![[0f64; 3]; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| positions[i as usize].map(|v| v as f64));
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let n = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        for &i in t {
+            let s = &mut acc[i as usize];
+            s[0] += n[0];
+            s[1] += n[1];
+            s[2] += n[2];
+        }
+    }
+    for n in &mut acc {
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        *n = if len > 0.0 {
+            [n[0] / len, n[1] / len, n[2] / len]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
+    }
+    acc
+}
+
+/// Largest vertex or index count a blob may declare (a patch has at most a few thousand).
+const MAX_ELEMENTS: u32 = 1 << 20;
+/// Largest interior quantisation shift.
+pub const MAX_SHIFT: u32 = 24;
+
+/// Model-wide quantisation grid: `world = origin + step * grid`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Grid {
+    pub origin: [f64; 3],
+    pub step: f64,
+}
+
+impl Grid {
+    /// Grid coordinate of a world position (clamped to the grid's non-negative range).
+    pub fn quantize(&self, p: [f32; 3]) -> [u32; 3] {
+        std::array::from_fn(|i| {
+            let g = ((p[i] as f64 - self.origin[i]) / self.step).round();
+            g.clamp(0.0, (u32::MAX >> 1) as f64) as u32
+        })
+    }
+
+    /// World position of a grid coordinate.
+    pub fn dequantize(&self, g: [u32; 3]) -> [f32; 3] {
+        std::array::from_fn(|i| (self.origin[i] + self.step * g[i] as f64) as f32)
+    }
+
+    /// Largest distance between a point and its quantised position at `shift`.
+    pub fn max_error(&self) -> f64 {
+        self.max_error_at(0)
+    }
+
+    /// Largest distance between a point and its position quantised at `2^shift` grid units.
+    pub fn max_error_at(&self, shift: u32) -> f64 {
+        self.step * (1u64 << shift) as f64 * 0.5 * 3f64.sqrt()
+    }
+
+    /// The interior quantisation shift for a node whose error bound is `error`: the largest
+    /// step of at most a fifth of the error (Nexus uses a tenth of the error per node).
+    pub fn shift_for_error(&self, error: f32) -> u32 {
+        let ratio = 0.4 * error as f64 / self.step;
+        if ratio.is_finite() && ratio >= 2.0 {
+            (ratio.log2().floor() as u32).min(MAX_SHIFT)
+        } else {
+            0
+        }
+    }
+}
+
+/// A decoded patch in flat arrays. `original_ids[i]` is the input-file index of vertex `i`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Patch {
+    pub positions: Vec<[f32; 3]>,
+    /// Empty when the model has no colour.
+    pub colors: Vec<[u8; 4]>,
+    /// Unit normals (stored on the border, computed inside).
+    pub normals: Vec<[f32; 3]>,
+    pub original_ids: Vec<u32>,
+    pub indices: Vec<u32>,
+    /// Grid coordinates of the vertices (exact; `positions` are their world values).
+    pub grid_positions: Vec<[u32; 3]>,
+}
+
+/// Input of [`encode`]: a patch with positions already on the grid.
+pub struct PatchRef<'a> {
+    pub grid_positions: &'a [[u32; 3]],
+    pub colors: Option<&'a [[u8; 4]]>,
+    pub normals: Option<&'a [[f32; 3]]>,
+    pub original_ids: &'a [u32],
+    pub indices: &'a [u32],
+    /// Interior vertices are stored at `2^shift` grid units (0 = full precision).
+    pub shift: u32,
+}
+
+/// Why a blob does not decode.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CodecError {
+    #[error("bad blob magic")]
+    Magic,
+    #[error("blob truncated")]
+    Truncated,
+    #[error("unknown compression {0}")]
+    Compression(u8),
+    #[error("decompression failed: {0}")]
+    Zstd(String),
+    #[error("stream {0} does not decode")]
+    Stream(&'static str),
+    #[error("patch declares implausible sizes")]
+    Sizes,
+}
+
+/// Vertices on an edge used by exactly one triangle (the patch border).
+pub fn border_vertices(indices: &[u32], vertex_count: usize) -> Vec<bool> {
+    let mut edges: Vec<u64> = indices
+        .chunks_exact(3)
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .map(|(a, b)| ((a.min(b) as u64) << 32) | a.max(b) as u64)
+        .collect();
+    edges.sort_unstable();
+    let mut border = vec![false; vertex_count];
+    let mut i = 0;
+    while i < edges.len() {
+        let mut j = i + 1;
+        while j < edges.len() && edges[j] == edges[i] {
+            j += 1;
+        }
+        if j - i == 1 {
+            let (a, b) = ((edges[i] >> 32) as usize, edges[i] as u32 as usize);
+            if a < vertex_count && b < vertex_count {
+                border[a] = true;
+                border[b] = true;
+            }
+        }
+        i = j;
+    }
+    border
+}
+
+/// The parallelogram predictor shared by encoder and decoder. Values are predicted in the
+/// order triangles introduce vertices; `value(v)` must return already-known values.
+struct Predictor {
+    known: Vec<bool>,
+    opposite: HashMap<u64, u32>,
+    last: Option<u32>,
+}
+
+/// How a new vertex is predicted.
+enum Prediction {
+    /// a + b - c
+    Parallelogram(u32, u32, u32),
+    /// (a + b) / 2, floored
+    Midpoint(u32, u32),
+    Copy(u32),
+    /// The first vertex: predicted as zero (positions relative to the patch minimum).
+    Zero,
+}
+
+impl Predictor {
+    fn new(n: usize) -> Self {
+        Predictor {
+            known: vec![false; n],
+            opposite: HashMap::with_capacity(n * 3),
+            last: None,
+        }
+    }
+
+    fn key(a: u32, b: u32) -> u64 {
+        ((a.min(b) as u64) << 32) | a.max(b) as u64
+    }
+
+    /// Visits every vertex once, in first-use order, with its prediction.
+    fn walk(
+        indices: &[u32],
+        n: usize,
+        mut visit: impl FnMut(u32, Prediction) -> Result<(), CodecError>,
+    ) -> Result<(), CodecError> {
+        let mut p = Predictor::new(n);
+        for t in indices.chunks_exact(3) {
+            for k in 0..3 {
+                let v = t[k];
+                if p.known[v as usize] {
+                    continue;
+                }
+                let (a, b) = (t[(k + 1) % 3], t[(k + 2) % 3]);
+                let (ka, kb) = (p.known[a as usize], p.known[b as usize]);
+                let prediction = if ka && kb {
+                    match p.opposite.get(&Self::key(a, b)) {
+                        Some(&c) => Prediction::Parallelogram(a, b, c),
+                        None => Prediction::Midpoint(a, b),
+                    }
+                } else if ka {
+                    Prediction::Copy(a)
+                } else if kb {
+                    Prediction::Copy(b)
+                } else {
+                    match p.last {
+                        Some(l) => Prediction::Copy(l),
+                        None => Prediction::Zero,
+                    }
+                };
+                visit(v, prediction)?;
+                p.known[v as usize] = true;
+                p.last = Some(v);
+            }
+            for k in 0..3 {
+                p.opposite
+                    .entry(Self::key(t[k], t[(k + 1) % 3]))
+                    .or_insert(t[(k + 2) % 3]);
+            }
+        }
+        Ok(())
+    }
+}
+
+fn predict<const N: usize>(values: &[[i64; N]], prediction: &Prediction) -> [i64; N] {
+    match *prediction {
+        // Wrapping: a corrupt blob may hold absurd residuals; the result is range-checked later.
+        Prediction::Parallelogram(a, b, c) => std::array::from_fn(|k| {
+            values[a as usize][k]
+                .wrapping_add(values[b as usize][k])
+                .wrapping_sub(values[c as usize][k])
+        }),
+        Prediction::Midpoint(a, b) => {
+            std::array::from_fn(|k| values[a as usize][k].wrapping_add(values[b as usize][k]) >> 1)
+        }
+        Prediction::Copy(a) => values[a as usize],
+        Prediction::Zero => [0; N],
+    }
+}
+
+fn put_varint(out: &mut Vec<u8>, value: i64) {
+    let mut z = ((value << 1) ^ (value >> 63)) as u64;
+    loop {
+        let byte = (z & 0x7f) as u8;
+        z >>= 7;
+        if z == 0 {
+            out.push(byte);
+            return;
+        }
+        out.push(byte | 0x80);
+    }
+}
+
+fn get_varint(bytes: &[u8], at: &mut usize) -> Result<i64, CodecError> {
+    let mut z = 0u64;
+    for shift in (0..64).step_by(7) {
+        let byte = *bytes.get(*at).ok_or(CodecError::Stream("varint"))?;
+        *at += 1;
+        z |= ((byte & 0x7f) as u64) << shift;
+        if byte & 0x80 == 0 {
+            return Ok(((z >> 1) as i64) ^ -((z & 1) as i64));
+        }
+    }
+    Err(CodecError::Stream("varint"))
+}
+
+/// Encodes a patch. Reorders vertices and triangles for cache efficiency and compression,
+/// which changes nothing a reader relies on: every vertex keeps its original ID.
+pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
+    let vertex_count = patch.grid_positions.len();
+    let mut indices = meshopt::optimize_vertex_cache(patch.indices, vertex_count);
+    let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertex_count);
+    let used = remap.iter().filter(|&&r| r != u32::MAX).count();
+    for i in &mut indices {
+        *i = remap[*i as usize];
+    }
+    let mut grid = vec![[0u32; 3]; used];
+    let mut ids = vec![0u32; used];
+    let mut colors = patch.colors.map(|_| vec![[0f32; 4]; used]);
+    let mut normals = patch.normals.map(|_| vec![[0f32; 3]; used]);
+    for (old, &new) in remap.iter().enumerate() {
+        if new == u32::MAX {
+            continue;
+        }
+        let new = new as usize;
+        grid[new] = patch.grid_positions[old];
+        ids[new] = patch.original_ids[old];
+        if let (Some(dst), Some(src)) = (colors.as_mut(), patch.colors) {
+            let c = src[old];
+            dst[new] = [
+                c[0] as f32 / 255.0,
+                c[1] as f32 / 255.0,
+                c[2] as f32 / 255.0,
+                c[3] as f32 / 255.0,
+            ];
+        }
+        if let (Some(dst), Some(src)) = (normals.as_mut(), patch.normals) {
+            dst[new] = src[old];
+        }
+    }
+    let min = if used == 0 {
+        [0; 3]
+    } else {
+        grid.iter().fold([u32::MAX; 3], |m, g| {
+            [m[0].min(g[0]), m[1].min(g[1]), m[2].min(g[2])]
+        })
+    };
+    let shift = patch.shift.min(MAX_SHIFT);
+    let border = border_vertices(&indices, used);
+
+    // Positions (relative to the patch minimum) and ids, predicted along the triangle order.
+    let mut decoded_pos: Vec<[i64; 3]> = vec![[0; 3]; used];
+    let mut id_values: Vec<[i64; 1]> = vec![[0]; used];
+    let mut pos_stream = Vec::with_capacity(used * 4);
+    let mut id_stream = Vec::with_capacity(used * 2);
+    let _ = Predictor::walk(&indices, used, |v, prediction| {
+        let v = v as usize;
+        let actual: [i64; 3] = std::array::from_fn(|k| (grid[v][k] - min[k]) as i64);
+        let guess = predict(&decoded_pos, &prediction);
+        if border[v] || shift == 0 {
+            for k in 0..3 {
+                put_varint(&mut pos_stream, actual[k] - guess[k]);
+            }
+            decoded_pos[v] = actual;
+        } else {
+            let half = 1i64 << (shift - 1);
+            for k in 0..3 {
+                let q = (actual[k] + half) >> shift;
+                put_varint(&mut pos_stream, q - (guess[k] >> shift));
+                decoded_pos[v][k] = q << shift;
+            }
+        }
+        let id_guess = predict(&id_values, &prediction);
+        put_varint(&mut id_stream, ids[v] as i64 - id_guess[0]);
+        id_values[v] = [ids[v] as i64];
+        Ok(())
+    });
+
+    let index_stream = encode_index_buffer(&indices, used).unwrap_or_default();
+    let color_stream = colors
+        .as_ref()
+        .map(|c| {
+            let filtered: Vec<[u8; 4]> = meshopt::encode_filter_color(c, COLOR_BITS);
+            encode_vertex_buffer(&filtered).unwrap_or_default()
+        })
+        .unwrap_or_default();
+    let mut normal_stream = Vec::new();
+    if let Some(n) = normals.as_ref() {
+        let predicted = grid_normals(&decoded_pos, &indices);
+        for v in (0..used).filter(|&v| border[v]) {
+            let actual = oct_encode(n[v].map(|x| x as f64));
+            let guess = oct_encode(predicted[v]);
+            put_varint(&mut normal_stream, actual[0] - guess[0]);
+            put_varint(&mut normal_stream, actual[1] - guess[1]);
+        }
+    }
+
+    let mut flags = 0;
+    if colors.is_some() {
+        flags |= FLAG_COLORS;
+    }
+
+    if normals.is_some() {
+        flags |= FLAG_NORMALS;
+    }
+    let streams = [
+        &index_stream,
+        &pos_stream,
+        &id_stream,
+        &color_stream,
+        &normal_stream,
+    ];
+    let mut payload =
+        Vec::with_capacity(PAYLOAD_HEADER + streams.iter().map(|s| s.len()).sum::<usize>());
+    for v in [
+        used as u32,
+        (indices.len() / 3) as u32,
+        flags,
+        shift,
+        min[0],
+        min[1],
+        min[2],
+    ] {
+        payload.extend_from_slice(&v.to_le_bytes());
+    }
+    for s in &streams {
+        payload.extend_from_slice(&(s.len() as u32).to_le_bytes());
+    }
+    payload.extend_from_slice(&0u32.to_le_bytes());
+    for s in &streams {
+        payload.extend_from_slice(s);
+    }
+
+    let (compression, body) =
+        match (zstd_level > 0).then(|| zstd::bulk::compress(&payload, zstd_level)) {
+            Some(Ok(c)) if c.len() < payload.len() => (COMPRESSION_ZSTD, c),
+            _ => (COMPRESSION_NONE, payload.clone()),
+        };
+    let mut blob = Vec::with_capacity(12 + body.len());
+    blob.extend_from_slice(&BLOB_MAGIC);
+    blob.extend_from_slice(&[compression, 0, 0, 0]);
+    blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    blob.extend_from_slice(&body);
+    blob
+}
+
+fn u32_at(bytes: &[u8], at: usize) -> Result<u32, CodecError> {
+    bytes
+        .get(at..at + 4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .ok_or(CodecError::Truncated)
+}
+
+/// Decodes a blob into world-space flat arrays.
+pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
+    if blob.len() < 12 {
+        return Err(CodecError::Truncated);
+    }
+    if blob[..4] != BLOB_MAGIC {
+        return Err(CodecError::Magic);
+    }
+    let payload_len = u32_at(blob, 8)? as usize;
+    if payload_len > 64 << 20 {
+        return Err(CodecError::Sizes);
+    }
+    let payload = match blob[4] {
+        COMPRESSION_NONE => blob[12..].to_vec(),
+        COMPRESSION_ZSTD => zstd::bulk::decompress(&blob[12..], payload_len)
+            .map_err(|e| CodecError::Zstd(e.to_string()))?,
+        other => return Err(CodecError::Compression(other)),
+    };
+    if payload.len() != payload_len || payload.len() < PAYLOAD_HEADER {
+        return Err(CodecError::Truncated);
+    }
+    let vertex_count = u32_at(&payload, 0)?;
+    let triangle_count = u32_at(&payload, 4)?;
+    let flags = u32_at(&payload, 8)?;
+    let shift = u32_at(&payload, 12)?;
+    if vertex_count > MAX_ELEMENTS || triangle_count > MAX_ELEMENTS || shift > MAX_SHIFT {
+        return Err(CodecError::Sizes);
+    }
+    let min = [
+        u32_at(&payload, 16)?,
+        u32_at(&payload, 20)?,
+        u32_at(&payload, 24)?,
+    ];
+    let mut lens = [0usize; 5];
+    for (i, l) in lens.iter_mut().enumerate() {
+        *l = u32_at(&payload, 28 + 4 * i)? as usize;
+    }
+    let mut at = PAYLOAD_HEADER;
+    let mut next = |len: usize| -> Result<&[u8], CodecError> {
+        let s = payload
+            .get(at..at.checked_add(len).ok_or(CodecError::Truncated)?)
+            .ok_or(CodecError::Truncated)?;
+        at += len;
+        Ok(s)
+    };
+    let (idx_s, pos_s, ids_s, col_s, nor_s) = (
+        next(lens[0])?,
+        next(lens[1])?,
+        next(lens[2])?,
+        next(lens[3])?,
+        next(lens[4])?,
+    );
+    let n = vertex_count as usize;
+
+    let indices: Vec<u32> = decode_index_buffer(idx_s, triangle_count as usize * 3)
+        .map_err(|_| CodecError::Stream("indices"))?;
+    if indices.iter().any(|&i| i >= vertex_count) {
+        return Err(CodecError::Stream("indices"));
+    }
+    let border = border_vertices(&indices, n);
+    let mut pos: Vec<[i64; 3]> = vec![[0; 3]; n];
+    let mut ids: Vec<[i64; 1]> = vec![[0]; n];
+    let (mut pos_at, mut ids_at) = (0usize, 0usize);
+    let mut visited = 0usize;
+    Predictor::walk(&indices, n, |v, prediction| {
+        let v = v as usize;
+        let guess = predict(&pos, &prediction);
+        if border[v] || shift == 0 {
+            for k in 0..3 {
+                pos[v][k] = guess[k].wrapping_add(get_varint(pos_s, &mut pos_at)?);
+            }
+        } else {
+            for k in 0..3 {
+                pos[v][k] = (guess[k] >> shift)
+                    .wrapping_add(get_varint(pos_s, &mut pos_at)?)
+                    .wrapping_shl(shift);
+            }
+        }
+        let id_guess = predict(&ids, &prediction);
+        ids[v] = [id_guess[0].wrapping_add(get_varint(ids_s, &mut ids_at)?)];
+        visited += 1;
+        Ok(())
+    })?;
+    if visited != n {
+        // Vertices no triangle uses cannot be predicted; valid blobs have none.
+        return Err(CodecError::Stream("positions"));
+    }
+    let mut grid_positions = Vec::with_capacity(n);
+    for p in &pos {
+        let g: [i64; 3] = std::array::from_fn(|k| p[k].wrapping_add(min[k] as i64));
+        if g.iter().any(|&c| c < 0 || c > u32::MAX as i64) {
+            return Err(CodecError::Stream("positions"));
+        }
+        grid_positions.push(g.map(|c| c as u32));
+    }
+    let original_ids = ids
+        .iter()
+        .map(|i| u32::try_from(i[0]).map_err(|_| CodecError::Stream("original ids")))
+        .collect::<Result<Vec<u32>, _>>()?;
+    let positions: Vec<[f32; 3]> = grid_positions.iter().map(|&g| grid.dequantize(g)).collect();
+
+    let colors = if flags & FLAG_COLORS != 0 {
+        let mut c: Vec<[u8; 4]> =
+            decode_vertex_buffer(col_s, n).map_err(|_| CodecError::Stream("colors"))?;
+        meshopt::decode_filter_color(&mut c);
+        c
+    } else {
+        Vec::new()
+    };
+    let normals = if flags & FLAG_NORMALS != 0 {
+        let predicted = grid_normals(&pos, &indices);
+        let mut normals: Vec<[f32; 3]> = predicted.iter().map(|n| n.map(|x| x as f32)).collect();
+        let mut at = 0usize;
+        for v in (0..n).filter(|&v| border[v]) {
+            let guess = oct_encode(predicted[v]);
+            let q = [
+                guess[0].wrapping_add(get_varint(nor_s, &mut at)?),
+                guess[1].wrapping_add(get_varint(nor_s, &mut at)?),
+            ];
+            normals[v] = oct_decode(q);
+        }
+        normals
+    } else {
+        Vec::new()
+    };
+    Ok(Patch {
+        positions,
+        colors,
+        normals,
+        original_ids,
+        indices,
+        grid_positions,
+    })
+}
+
+/// Area-weighted vertex normals of a triangle set in world space (unit length; +Z for
+/// isolated vertices).
+pub fn computed_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
+    let mut acc = vec![[0f32; 3]; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| positions[i as usize]);
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let n = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        for &i in t {
+            for k in 0..3 {
+                acc[i as usize][k] += n[k];
+            }
+        }
+    }
+    acc.iter()
+        .map(|n| {
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            if len > 0.0 {
+                [n[0] / len, n[1] / len, n[2] / len]
+            } else {
+                [0.0, 0.0, 1.0]
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sheet() -> (
+        Grid,
+        Vec<[u32; 3]>,
+        Vec<u32>,
+        Vec<[u8; 4]>,
+        Vec<[f32; 3]>,
+        Vec<u32>,
+    ) {
+        let grid = Grid {
+            origin: [-1.0, -2.0, 0.5],
+            step: 1.0 / 4096.0,
+        };
+        let n = 12u32;
+        let mut gp = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                gp.push([x * 37 + 5, y * 41 + 9, 1000 + (x * y) % 7]);
+            }
+        }
+        let ids: Vec<u32> = (0..n * n).map(|i| 5000 + i * 3).collect();
+        let colors: Vec<[u8; 4]> = (0..n * n).map(|i| [(i * 2) as u8, 100, 200, 255]).collect();
+        let normals: Vec<[f32; 3]> = (0..n * n).map(|_| [0.0, 0.6, 0.8]).collect();
+        let mut indices = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let i = y * n + x;
+                indices.extend_from_slice(&[i, i + 1, i + n + 1, i, i + n + 1, i + n]);
+            }
+        }
+        (grid, gp, ids, colors, normals, indices)
+    }
+
+    fn canon(tris: impl Iterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
+        let mut t: Vec<[u32; 3]> = tris
+            .map(|t| {
+                let r = (0..3).min_by_key(|&k| t[k]).unwrap_or(0);
+                [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
+            })
+            .collect();
+        t.sort();
+        t
+    }
+
+    #[test]
+    fn roundtrip_is_exact_at_full_precision() {
+        let (grid, gp, ids, colors, normals, indices) = sheet();
+        let blob = encode(
+            &PatchRef {
+                grid_positions: &gp,
+                colors: Some(&colors),
+                normals: Some(&normals),
+                original_ids: &ids,
+                indices: &indices,
+                shift: 0,
+            },
+            3,
+        );
+        let p = decode(&blob, &grid).expect("decodes");
+        let before = canon(
+            indices
+                .chunks(3)
+                .map(|t| [ids[t[0] as usize], ids[t[1] as usize], ids[t[2] as usize]]),
+        );
+        let after = canon(p.indices.chunks(3).map(|t| {
+            [
+                p.original_ids[t[0] as usize],
+                p.original_ids[t[1] as usize],
+                p.original_ids[t[2] as usize],
+            ]
+        }));
+        assert_eq!(before, after);
+        for (i, id) in p.original_ids.iter().enumerate() {
+            let old = ids.iter().position(|x| x == id).expect("id kept");
+            assert_eq!(p.grid_positions[i], gp[old]);
+            assert_eq!(p.positions[i], grid.dequantize(gp[old]));
+            for k in 0..3 {
+                assert!(
+                    (p.colors[i][k] as i32 - colors[old][k] as i32).abs() <= 6,
+                    "{:?} vs {:?}",
+                    p.colors[i],
+                    colors[old]
+                );
+            }
+        }
+        let border = border_vertices(&p.indices, p.positions.len());
+        for (i, b) in border.iter().enumerate() {
+            if *b {
+                let d: f32 = (0..3).map(|k| p.normals[i][k] * normals[0][k]).sum();
+                assert!(d > 0.9995, "border normal error {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn coarse_interior_moves_at_most_half_a_coarse_step_and_border_is_exact() {
+        let (grid, gp, ids, _, _, indices) = sheet();
+        let shift = 4;
+        let blob = encode(
+            &PatchRef {
+                grid_positions: &gp,
+                colors: None,
+                normals: None,
+                original_ids: &ids,
+                indices: &indices,
+                shift,
+            },
+            3,
+        );
+        let p = decode(&blob, &grid).expect("decodes");
+        let border = border_vertices(&p.indices, p.positions.len());
+        for (i, id) in p.original_ids.iter().enumerate() {
+            let old = ids.iter().position(|x| x == id).expect("id kept");
+            for k in 0..3 {
+                let d = (p.grid_positions[i][k] as i64 - gp[old][k] as i64).abs();
+                if border[i] {
+                    assert_eq!(d, 0);
+                } else {
+                    assert!(d <= 1 << (shift - 1), "moved {d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn octahedral_roundtrip_is_within_a_degree() {
+        for k in 0..2000 {
+            let t = k as f64 * 0.37;
+            let v = [
+                t.sin() * (t * 0.3).cos(),
+                (t * 1.7).cos(),
+                (t * 0.11).sin() - 0.2,
+            ];
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let v = v.map(|x| x / len);
+            let d = oct_decode(oct_encode(v));
+            let dot: f64 = (0..3).map(|i| d[i] as f64 * v[i]).sum();
+            assert!(
+                dot > 0.9995f64.min(1.0f64.to_radians().cos()),
+                "{v:?} -> {d:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn corrupt_blobs_are_errors_not_panics() {
+        let grid = Grid {
+            origin: [0.0; 3],
+            step: 1.0,
+        };
+        assert!(decode(b"", &grid).is_err());
+        assert!(decode(b"MWP2\x01\0\0\0\xff\xff\xff\x00garbage", &grid).is_err());
+        let (_, gp, ids, colors, normals, indices) = sheet();
+        let blob = encode(
+            &PatchRef {
+                grid_positions: &gp,
+                colors: Some(&colors),
+                normals: Some(&normals),
+                original_ids: &ids,
+                indices: &indices,
+                shift: 2,
+            },
+            0,
+        );
+        for cut in (0..blob.len()).step_by(7) {
+            let _ = decode(&blob[..cut], &grid);
+        }
+        let mut flipped = blob.clone();
+        for i in 12..flipped.len() {
+            flipped[i] ^= 0x5a;
+            let _ = decode(&flipped, &grid);
+            flipped[i] ^= 0x5a;
+        }
+    }
+}

@@ -1,0 +1,320 @@
+//! Measured two-sided distance between a group before and after simplification.
+//!
+//! Quadric error (Garland–Heckbert, the system paper §3.2's metric) steers the collapses but is
+//! not a distance bound; a node's error must bound its distance to the original surface so
+//! that a cut at error E is within E of the scan. We measure the simplified group against its
+//! input (every removed input vertex to the simplified surface; centroids and edge midpoints of
+//! simplified triangles to the input surface) and accumulate bounds level by level through the
+//! triangle inequality (see [`super::dag`]).
+
+use glam::Vec3;
+
+/// Uniform grid over a triangle set for nearest-surface queries.
+pub struct TriangleGrid<'a> {
+    positions: &'a [[f32; 3]],
+    indices: &'a [u32],
+    origin: Vec3,
+    cell: f32,
+    dims: [i32; 3],
+    offsets: Vec<u32>,
+    items: Vec<u32>,
+    /// Per-triangle bounding boxes: a cheap lower bound that skips most exact tests.
+    boxes: Vec<(Vec3, Vec3)>,
+}
+
+impl<'a> TriangleGrid<'a> {
+    /// Builds the grid; cells are about twice the mean edge length.
+    pub fn new(positions: &'a [[f32; 3]], indices: &'a [u32]) -> TriangleGrid<'a> {
+        let tri_count = indices.len() / 3;
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        let mut area = 0.0f64;
+        for t in indices.chunks_exact(3) {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
+            lo = lo.min(a).min(b).min(c);
+            hi = hi.max(a).max(b).max(c);
+            area += (b - a).cross(c - a).length() as f64 * 0.5;
+        }
+        if tri_count == 0 {
+            lo = Vec3::ZERO;
+            hi = Vec3::ZERO;
+        }
+        let extent = (hi - lo).max(Vec3::splat(1e-12));
+        let mut cell = (2.0 * (area / tri_count.max(1) as f64).sqrt()) as f32;
+        let max_cells = (tri_count * 4).max(64) as f32;
+        if !(cell > 0.0) {
+            cell = extent.max_element() / 8.0;
+        }
+        while (extent.x / cell + 1.0) * (extent.y / cell + 1.0) * (extent.z / cell + 1.0)
+            > max_cells
+        {
+            cell *= 1.5;
+        }
+        let dims = [0, 1, 2].map(|k| ((extent[k] / cell) as i32 + 1).max(1));
+        let cell_count = (dims[0] * dims[1] * dims[2]) as usize;
+        let mut counts = vec![0u32; cell_count + 1];
+        let mut grid = TriangleGrid {
+            positions,
+            indices,
+            origin: lo,
+            cell,
+            dims,
+            offsets: Vec::new(),
+            items: Vec::new(),
+            boxes: Vec::with_capacity(tri_count),
+        };
+        let mut ranges = Vec::with_capacity(tri_count);
+        for t in indices.chunks_exact(3) {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
+            let (bl, bh) = (a.min(b).min(c), a.max(b).max(c));
+            grid.boxes.push((bl, bh));
+            let (l, h) = (grid.cell_of(bl), grid.cell_of(bh));
+            ranges.push((l, h));
+            for z in l[2]..=h[2] {
+                for y in l[1]..=h[1] {
+                    for x in l[0]..=h[0] {
+                        counts[grid.index([x, y, z])] += 1;
+                    }
+                }
+            }
+        }
+        let mut offsets = vec![0u32; cell_count + 1];
+        for i in 0..cell_count {
+            offsets[i + 1] = offsets[i] + counts[i];
+        }
+        let mut fill = offsets.clone();
+        let mut items = vec![0u32; offsets[cell_count] as usize];
+        for (t, (l, h)) in ranges.into_iter().enumerate() {
+            for z in l[2]..=h[2] {
+                for y in l[1]..=h[1] {
+                    for x in l[0]..=h[0] {
+                        let c = grid.index([x, y, z]);
+                        items[fill[c] as usize] = t as u32;
+                        fill[c] += 1;
+                    }
+                }
+            }
+        }
+        grid.offsets = offsets;
+        grid.items = items;
+        grid
+    }
+
+    fn cell_of(&self, p: Vec3) -> [i32; 3] {
+        let g = (p - self.origin) / self.cell;
+        [0, 1, 2].map(|k| (g[k].floor() as i32).clamp(0, self.dims[k] - 1))
+    }
+
+    fn index(&self, c: [i32; 3]) -> usize {
+        ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
+    }
+
+    /// Calls `f` with every cell at Chebyshev distance `ring` from `home`.
+    fn visit_shell(&self, home: [i32; 3], ring: i32, mut f: impl FnMut([i32; 3])) {
+        for z in (home[2] - ring).max(0)..=(home[2] + ring).min(self.dims[2] - 1) {
+            for y in (home[1] - ring).max(0)..=(home[1] + ring).min(self.dims[1] - 1) {
+                if (z - home[2]).abs() < ring && (y - home[1]).abs() < ring {
+                    // Interior row of the shell: only its two end cells are on the shell.
+                    for x in [home[0] - ring, home[0] + ring] {
+                        if x >= 0 && x < self.dims[0] {
+                            f([x, y, z]);
+                        }
+                    }
+                } else {
+                    for x in (home[0] - ring).max(0)..=(home[0] + ring).min(self.dims[0] - 1) {
+                        f([x, y, z]);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Squared distance from `p` to the box of cell `c`.
+    fn cell_distance_sq(&self, p: Vec3, c: [i32; 3]) -> f32 {
+        let lo = self.origin + Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) * self.cell;
+        let hi = lo + Vec3::splat(self.cell);
+        (lo - p).max(p - hi).max(Vec3::ZERO).length_squared()
+    }
+
+    /// Distance from `p` to the nearest triangle (f32::MAX if there are none).
+    pub fn distance(&self, p: [f32; 3]) -> f32 {
+        if self.indices.is_empty() {
+            return f32::MAX;
+        }
+        let p = Vec3::from(p);
+        let home = self.cell_of(p);
+        // Distance from p to the grid box (p may lie outside it).
+        let box_hi = self.origin
+            + Vec3::new(
+                self.dims[0] as f32,
+                self.dims[1] as f32,
+                self.dims[2] as f32,
+            ) * self.cell;
+        let outside = (self.origin - p).max(p - box_hi).max(Vec3::ZERO).length();
+        // Distance from p to the faces of its home cell, per axis (0 when p lies outside the
+        // grid on that axis: the clamped home cell is then at the grid's edge).
+        let local = (p - self.origin) / self.cell;
+        let mut margin = f32::MAX;
+        for k in 0..3 {
+            let f = local[k] - home[k] as f32;
+            if (0.0..=1.0).contains(&f) {
+                margin = margin.min(f.min(1.0 - f));
+            } else {
+                margin = 0.0;
+            }
+        }
+        let max_ring = self.dims.iter().copied().max().unwrap_or(1);
+        let mut best_sq = f32::MAX;
+        for ring in 0..=max_ring {
+            self.visit_shell(home, ring, |cell| {
+                if self.cell_distance_sq(p, cell) >= best_sq {
+                    return;
+                }
+                let c = self.index(cell);
+                for &t in &self.items[self.offsets[c] as usize..self.offsets[c + 1] as usize] {
+                    let (lo, hi) = self.boxes[t as usize];
+                    if (lo - p).max(p - hi).max(Vec3::ZERO).length_squared() >= best_sq {
+                        continue;
+                    }
+                    let tri = &self.indices[t as usize * 3..t as usize * 3 + 3];
+                    let [a, b, cc] =
+                        [tri[0], tri[1], tri[2]].map(|i| Vec3::from(self.positions[i as usize]));
+                    best_sq = best_sq.min(point_triangle_distance_sq(p, a, b, cc));
+                }
+            });
+            // Anything not yet visited lies beyond the searched cube of cells: at least
+            // `ring + margin` cells away along one axis, and `outside` away from the grid box.
+            let along = (ring as f32 + margin) * self.cell;
+            if best_sq <= along * along + outside * outside {
+                break;
+            }
+        }
+        best_sq.sqrt()
+    }
+}
+
+/// Squared distance from `p` to triangle `abc` (Ericson, Real-Time Collision Detection §5.1.5).
+pub fn point_triangle_distance_sq(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return ap.length_squared();
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return bp.length_squared();
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (p - (a + ab * v)).length_squared();
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return cp.length_squared();
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (p - (a + ac * w)).length_squared();
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (p - (b + (c - b) * w)).length_squared();
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let v = vb * denom;
+    let w = vc * denom;
+    let q = a + ab * v + ac * w;
+    let d = (p - q).length_squared();
+    if d.is_finite() {
+        d
+    } else {
+        ap.length_squared()
+            .min(bp.length_squared())
+            .min(cp.length_squared())
+    }
+}
+
+/// Two-sided distance between an input triangle set and its simplification, both indexing
+/// the same vertex array. `kept[v]` tells whether vertex `v` is used by the simplification
+/// (kept vertices are at distance 0 from it and are skipped).
+pub fn simplification_distance(
+    positions: &[[f32; 3]],
+    input: &[u32],
+    simplified: &[u32],
+    kept: &[bool],
+) -> f32 {
+    let mut worst = 0.0f32;
+    let to_simplified = TriangleGrid::new(positions, simplified);
+    let mut seen = vec![false; positions.len()];
+    for &v in input {
+        let v = v as usize;
+        if kept[v] || seen[v] {
+            continue;
+        }
+        seen[v] = true;
+        worst = worst.max(to_simplified.distance(positions[v]));
+    }
+    let to_input = TriangleGrid::new(positions, input);
+    let mut edges: Vec<(u32, u32)> = Vec::with_capacity(simplified.len());
+    for t in simplified.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
+        worst = worst.max(to_input.distance(((a + b + c) / 3.0).into()));
+        for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            edges.push((u.min(v), u.max(v)));
+        }
+    }
+    edges.sort_unstable();
+    edges.dedup();
+    for (u, v) in edges {
+        let mid = (Vec3::from(positions[u as usize]) + Vec3::from(positions[v as usize])) * 0.5;
+        worst = worst.max(to_input.distance(mid.into()));
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_distance_matches_brute_force() {
+        let mut pos = Vec::new();
+        let mut idx = Vec::new();
+        let n = 20u32;
+        for y in 0..=n {
+            for x in 0..=n {
+                let (fx, fy) = (x as f32 / n as f32, y as f32 / n as f32);
+                pos.push([fx, fy, (fx * 6.0).sin() * 0.1]);
+            }
+        }
+        for y in 0..n {
+            for x in 0..n {
+                let i = y * (n + 1) + x;
+                idx.extend_from_slice(&[i, i + 1, i + n + 2, i, i + n + 2, i + n + 1]);
+            }
+        }
+        let grid = TriangleGrid::new(&pos, &idx);
+        for k in 0..200 {
+            let t = k as f32 * 0.618;
+            let p = [t.sin() * 1.5, (t * 0.7).cos() * 1.5, (t * 1.3).sin() * 0.8];
+            let brute = idx
+                .chunks(3)
+                .map(|tr| {
+                    let [a, b, c] = [tr[0], tr[1], tr[2]].map(|i| Vec3::from(pos[i as usize]));
+                    point_triangle_distance_sq(Vec3::from(p), a, b, c)
+                })
+                .fold(f32::MAX, f32::min)
+                .sqrt();
+            assert!((grid.distance(p) - brute).abs() < 1e-5, "{p:?}");
+        }
+    }
+}

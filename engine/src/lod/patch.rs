@@ -1,0 +1,205 @@
+//! Patches during the build: flat arrays of original vertices plus local triangles, and the
+//! scratch file that holds them out of core between levels.
+
+use std::fs::File;
+use std::io::{self, Write};
+use std::os::unix::fs::FileExt;
+use std::path::Path;
+use std::sync::Mutex;
+
+/// A patch while building. Every vertex is an input vertex (`ids` are original vertex IDs).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BuildPatch {
+    pub ids: Vec<u32>,
+    pub positions: Vec<[f32; 3]>,
+    /// Empty when the model has no colour.
+    pub colors: Vec<[u8; 4]>,
+    pub normals: Vec<[f32; 3]>,
+    /// Local indices, three per triangle.
+    pub indices: Vec<u32>,
+}
+
+/// Undirected edge between two original vertices, as one sortable key.
+#[inline]
+pub fn edge_key(a: u32, b: u32) -> u64 {
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    ((lo as u64) << 32) | hi as u64
+}
+
+/// The two original vertex IDs of an edge key.
+#[inline]
+pub fn edge_ends(key: u64) -> (u32, u32) {
+    ((key >> 32) as u32, key as u32)
+}
+
+impl BuildPatch {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// Edges used by exactly one triangle of this patch (its border), as sorted keys of
+    /// original IDs. Edges used by three or more triangles (non-manifold) count as interior.
+    pub fn border_edges(&self) -> Vec<u64> {
+        let mut keys: Vec<u64> = self
+            .indices
+            .chunks_exact(3)
+            .flat_map(|t| {
+                let [a, b, c] = [t[0], t[1], t[2]].map(|i| self.ids[i as usize]);
+                [edge_key(a, b), edge_key(b, c), edge_key(c, a)]
+            })
+            .collect();
+        keys.sort_unstable();
+        let mut border = Vec::new();
+        let mut i = 0;
+        while i < keys.len() {
+            let mut j = i + 1;
+            while j < keys.len() && keys[j] == keys[i] {
+                j += 1;
+            }
+            if j - i == 1 {
+                border.push(keys[i]);
+            }
+            i = j;
+        }
+        border
+    }
+
+    /// Serialises to the scratch format (native layout; never leaves the build machine).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let n = self.ids.len();
+        let mut out = Vec::with_capacity(16 + n * 32 + self.indices.len() * 4);
+        for v in [
+            n as u32,
+            self.indices.len() as u32,
+            !self.colors.is_empty() as u32,
+            !self.normals.is_empty() as u32,
+        ] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(bytemuck::cast_slice(&self.ids));
+        out.extend_from_slice(bytemuck::cast_slice(&self.positions));
+        out.extend_from_slice(bytemuck::cast_slice(&self.colors));
+        out.extend_from_slice(bytemuck::cast_slice(&self.normals));
+        out.extend_from_slice(bytemuck::cast_slice(&self.indices));
+        out
+    }
+
+    /// Reads back what [`BuildPatch::to_bytes`] wrote.
+    pub fn from_bytes(bytes: &[u8]) -> io::Result<BuildPatch> {
+        let bad = || io::Error::new(io::ErrorKind::InvalidData, "corrupt scratch patch");
+        let word = |i: usize| -> io::Result<usize> {
+            let b = bytes.get(i * 4..i * 4 + 4).ok_or_else(bad)?;
+            Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+        };
+        let (n, ni, has_c, has_n) = (word(0)?, word(1)?, word(2)? != 0, word(3)? != 0);
+        let mut at = 16;
+        let mut take = |len: usize| -> io::Result<&[u8]> {
+            let s = bytes.get(at..at + len).ok_or_else(bad)?;
+            at += len;
+            Ok(s)
+        };
+        let ids = bytemuck::pod_collect_to_vec(take(n * 4)?);
+        let positions = bytemuck::pod_collect_to_vec(take(n * 12)?);
+        let colors = if has_c {
+            bytemuck::pod_collect_to_vec(take(n * 4)?)
+        } else {
+            Vec::new()
+        };
+        let normals = if has_n {
+            bytemuck::pod_collect_to_vec(take(n * 12)?)
+        } else {
+            Vec::new()
+        };
+        let indices = bytemuck::pod_collect_to_vec(take(ni * 4)?);
+        Ok(BuildPatch {
+            ids,
+            positions,
+            colors,
+            normals,
+            indices,
+        })
+    }
+}
+
+/// An append-only scratch file of byte records, readable concurrently by offset.
+pub struct ScratchFile {
+    file: File,
+    tail: Mutex<(io::BufWriter<File>, u64)>,
+}
+
+impl ScratchFile {
+    pub fn create(path: &Path) -> io::Result<ScratchFile> {
+        let file = File::options()
+            .create(true)
+            .truncate(true)
+            .read(true)
+            .write(true)
+            .open(path)?;
+        let writer = io::BufWriter::with_capacity(1 << 20, file.try_clone()?);
+        Ok(ScratchFile {
+            file,
+            tail: Mutex::new((writer, 0)),
+        })
+    }
+
+    /// Appends a record; returns its offset.
+    pub fn append(&self, bytes: &[u8]) -> io::Result<u64> {
+        let mut tail = self
+            .tail
+            .lock()
+            .map_err(|_| io::Error::other("scratch lock poisoned"))?;
+        let offset = tail.1;
+        tail.0.write_all(bytes)?;
+        tail.1 += bytes.len() as u64;
+        Ok(offset)
+    }
+
+    /// Makes everything appended so far readable.
+    pub fn flush(&self) -> io::Result<()> {
+        let mut tail = self
+            .tail
+            .lock()
+            .map_err(|_| io::Error::other("scratch lock poisoned"))?;
+        tail.0.flush()
+    }
+
+    /// Reads a record (after [`ScratchFile::flush`]).
+    pub fn read(&self, offset: u64, len: usize) -> io::Result<Vec<u8>> {
+        let mut buf = vec![0u8; len];
+        self.file.read_exact_at(&mut buf, offset)?;
+        Ok(buf)
+    }
+
+    /// Bytes appended so far.
+    pub fn len(&self) -> u64 {
+        self.tail.lock().map(|t| t.1).unwrap_or(0)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn border_of_two_triangles_is_the_quad_outline() {
+        let p = BuildPatch {
+            ids: vec![10, 11, 12, 13],
+            positions: vec![[0.0; 3]; 4],
+            indices: vec![0, 1, 2, 0, 2, 3],
+            ..Default::default()
+        };
+        let mut expect = vec![
+            edge_key(10, 11),
+            edge_key(11, 12),
+            edge_key(12, 13),
+            edge_key(13, 10),
+        ];
+        expect.sort_unstable();
+        assert_eq!(p.border_edges(), expect);
+        assert_eq!(BuildPatch::from_bytes(&p.to_bytes()).expect("roundtrip"), p);
+    }
+}

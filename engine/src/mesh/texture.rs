@@ -1,0 +1,208 @@
+//! Colour textures sampled into vertex colours (OBJ `map_Kd`, glTF base colour).
+//!
+//! Texels are sRGB; sampling is bilinear in linear light, and callers encode back to sRGB.
+
+use std::path::Path;
+use std::sync::LazyLock;
+
+/// Largest texture accepted, in pixels per side (decoding is also bounded by `image`'s limits).
+const MAX_SIDE: u32 = 32768;
+
+/// How texture coordinates outside [0, 1] map onto the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Wrap {
+    Repeat,
+    Clamp,
+    Mirror,
+}
+
+/// A decoded RGBA8 (sRGB) image.
+pub(crate) struct Texture {
+    width: u32,
+    height: u32,
+    texels: Vec<[u8; 4]>,
+}
+
+static SRGB_TO_LINEAR: LazyLock<[f32; 256]> = LazyLock::new(|| {
+    let mut t = [0.0; 256];
+    for (i, v) in t.iter_mut().enumerate() {
+        let c = i as f32 / 255.0;
+        *v = if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        };
+    }
+    t
+});
+
+/// sRGB byte to linear light in [0, 1].
+#[inline]
+pub(crate) fn srgb_to_linear(c: u8) -> f32 {
+    SRGB_TO_LINEAR[c as usize]
+}
+
+/// Linear light (clamped to [0, 1]) to an sRGB byte.
+#[inline]
+pub(crate) fn linear_to_srgb(l: f32) -> u8 {
+    let l = if l.is_nan() { 0.0 } else { l.clamp(0.0, 1.0) };
+    let c = if l <= 0.003_130_8 {
+        l * 12.92
+    } else {
+        1.055 * l.powf(1.0 / 2.4) - 0.055
+    };
+    (c * 255.0 + 0.5) as u8
+}
+
+/// Linear RGBA (alpha linear too) to sRGB RGBA bytes.
+pub(crate) fn encode_rgba(l: [f32; 4]) -> [u8; 4] {
+    let a = if l[3].is_nan() {
+        1.0
+    } else {
+        l[3].clamp(0.0, 1.0)
+    };
+    [
+        linear_to_srgb(l[0]),
+        linear_to_srgb(l[1]),
+        linear_to_srgb(l[2]),
+        (a * 255.0 + 0.5) as u8,
+    ]
+}
+
+impl Texture {
+    /// Decodes an image in any enabled format (PNG, JPEG, WebP).
+    pub fn decode(bytes: &[u8]) -> Result<Texture, String> {
+        let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?;
+        Self::from_reader(reader)
+    }
+
+    /// Reads and decodes an image file.
+    pub fn open(path: &Path) -> Result<Texture, String> {
+        let reader = image::ImageReader::open(path)
+            .map_err(|e| e.to_string())?
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?;
+        Self::from_reader(reader)
+    }
+
+    fn from_reader<R: std::io::BufRead + std::io::Seek>(
+        mut reader: image::ImageReader<R>,
+    ) -> Result<Texture, String> {
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_SIDE);
+        limits.max_image_height = Some(MAX_SIDE);
+        reader.limits(limits);
+        let img = reader.decode().map_err(|e| e.to_string())?.into_rgba8();
+        let (width, height) = img.dimensions();
+        if width == 0 || height == 0 {
+            return Err("the image is empty".into());
+        }
+        let texels = bytemuck::cast_slice::<u8, [u8; 4]>(img.as_raw()).to_vec();
+        Ok(Texture {
+            width,
+            height,
+            texels,
+        })
+    }
+
+    #[cfg(test)]
+    pub fn from_texels(width: u32, height: u32, texels: Vec<[u8; 4]>) -> Texture {
+        assert_eq!(texels.len(), (width * height) as usize);
+        Texture {
+            width,
+            height,
+            texels,
+        }
+    }
+
+    /// Bilinear sample in linear light. `(u, v)` use the glTF convention: `v = 0` is the top
+    /// row of the image (OBJ callers pass `1 - v`). Non-finite coordinates sample (0, 0).
+    pub fn sample(&self, u: f32, v: f32, wrap_s: Wrap, wrap_t: Wrap) -> [f32; 4] {
+        let (x0, x1, fx) = axis(u, self.width, wrap_s);
+        let (y0, y1, fy) = axis(v, self.height, wrap_t);
+        let w = self.width as usize;
+        let texel = |x: usize, y: usize| {
+            let t = self
+                .texels
+                .get(y * w + x)
+                .copied()
+                .unwrap_or([0, 0, 0, 255]);
+            [
+                srgb_to_linear(t[0]),
+                srgb_to_linear(t[1]),
+                srgb_to_linear(t[2]),
+                t[3] as f32 / 255.0,
+            ]
+        };
+        let (a, b, c, d) = (texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1));
+        let mut out = [0.0; 4];
+        for i in 0..4 {
+            let top = a[i] + (b[i] - a[i]) * fx;
+            let bottom = c[i] + (d[i] - c[i]) * fx;
+            out[i] = top + (bottom - top) * fy;
+        }
+        out
+    }
+}
+
+/// The two texel indices along one axis and the weight of the second.
+fn axis(t: f32, size: u32, wrap: Wrap) -> (usize, usize, f32) {
+    let t = if t.is_finite() { t as f64 } else { 0.0 };
+    let t = match wrap {
+        Wrap::Repeat => t - t.floor(),
+        Wrap::Clamp => t.clamp(0.0, 1.0),
+        Wrap::Mirror => {
+            let m = t.rem_euclid(2.0);
+            if m > 1.0 { 2.0 - m } else { m }
+        }
+    };
+    let n = size as i64;
+    let x = t * size as f64 - 0.5;
+    let x0 = x.floor();
+    let f = (x - x0) as f32;
+    let x0 = x0 as i64;
+    let fix = |i: i64| -> usize {
+        match wrap {
+            Wrap::Repeat => i.rem_euclid(n) as usize,
+            _ => i.clamp(0, n - 1) as usize,
+        }
+    };
+    (fix(x0), fix(x0 + 1), f)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_roundtrip() {
+        for c in 0..=255u8 {
+            assert_eq!(linear_to_srgb(srgb_to_linear(c)), c);
+        }
+    }
+
+    #[test]
+    fn bilinear_centre_and_wrap() {
+        let t = Texture::from_texels(2, 1, vec![[0, 0, 0, 255], [255, 255, 255, 255]]);
+        // Texel centres.
+        assert_eq!(
+            encode_rgba(t.sample(0.25, 0.5, Wrap::Clamp, Wrap::Clamp))[0],
+            0
+        );
+        assert_eq!(
+            encode_rgba(t.sample(0.75, 0.5, Wrap::Clamp, Wrap::Clamp))[0],
+            255
+        );
+        // Halfway is half in linear light, not half in sRGB.
+        let mid = t.sample(0.5, 0.5, Wrap::Clamp, Wrap::Clamp);
+        assert!((mid[0] - 0.5).abs() < 1e-6);
+        assert_eq!(encode_rgba(mid)[0], 188);
+        // Repeat wraps to the other side; NaN does not panic.
+        let r = t.sample(1.25, 0.5, Wrap::Repeat, Wrap::Repeat);
+        assert_eq!(encode_rgba(r)[0], 0);
+        let _ = t.sample(f32::NAN, f32::INFINITY, Wrap::Mirror, Wrap::Repeat);
+        let _ = t.sample(-1e30, 1e30, Wrap::Repeat, Wrap::Mirror);
+    }
+}

@@ -1,0 +1,200 @@
+//! Render pipelines of the headless renderer (system paper §3.3 drawing; §4.1.1/§4.1.2 the
+//! normal, depth and index images selection runs on; §2.2 the bold outline of a hovered part).
+//!
+//! Two variants of the main pass share one vertex shader: `image` (colour + highlight mask) for
+//! pictures, `buffers` (colour, packed normal, ids) for selection. Depth is a `Depth32Float`
+//! attachment with reversed Z (cleared to 0, test `Greater`), read back as linear view depth.
+
+use wgpu::{
+    BindGroupLayout, BindGroupLayoutEntry, BindingType, BufferBindingType, ColorTargetState,
+    Device, RenderPipeline, ShaderStages, TextureFormat,
+};
+
+pub const COLOR_FORMAT: TextureFormat = TextureFormat::Rgba8Unorm;
+pub const MASK_FORMAT: TextureFormat = TextureFormat::R32Uint;
+pub const NORMAL_FORMAT: TextureFormat = TextureFormat::R32Uint;
+pub const IDS_FORMAT: TextureFormat = TextureFormat::Rgba32Uint;
+pub const DEPTH_FORMAT: TextureFormat = TextureFormat::Depth32Float;
+
+const RENDER_WGSL: &str = include_str!("../../../shaders/render.wgsl");
+const OUTLINE_WGSL: &str = include_str!("../../../shaders/outline.wgsl");
+
+/// Pipelines and layouts, created once per renderer.
+pub struct Pipelines {
+    pub frame_layout: BindGroupLayout,
+    pub patch_layout: BindGroupLayout,
+    pub outline_layout: BindGroupLayout,
+    pub image: RenderPipeline,
+    pub buffers: RenderPipeline,
+    pub outline: RenderPipeline,
+}
+
+fn storage(binding: u32, visibility: ShaderStages) -> BindGroupLayoutEntry {
+    BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: BindingType::Buffer {
+            ty: BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn uniform(binding: u32, visibility: ShaderStages) -> BindGroupLayoutEntry {
+    BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: BindingType::Buffer {
+            ty: BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn texture(binding: u32, sample_type: wgpu::TextureSampleType) -> BindGroupLayoutEntry {
+    BindGroupLayoutEntry {
+        binding,
+        visibility: ShaderStages::FRAGMENT,
+        ty: BindingType::Texture {
+            sample_type,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+fn target(format: TextureFormat) -> Option<ColorTargetState> {
+    Some(ColorTargetState {
+        format,
+        blend: None,
+        write_mask: wgpu::ColorWrites::ALL,
+    })
+}
+
+impl Pipelines {
+    pub fn new(device: &Device) -> Pipelines {
+        let vf = ShaderStages::VERTEX | ShaderStages::FRAGMENT;
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &[
+                uniform(0, vf),
+                storage(1, ShaderStages::VERTEX),
+                storage(2, ShaderStages::VERTEX),
+                uniform(3, ShaderStages::FRAGMENT),
+            ],
+        });
+        let patch_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("patch"),
+            entries: &[storage(0, ShaderStages::VERTEX)],
+        });
+        let outline_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("outline"),
+            entries: &[
+                texture(0, wgpu::TextureSampleType::Float { filterable: false }),
+                texture(1, wgpu::TextureSampleType::Uint),
+                uniform(2, ShaderStages::FRAGMENT),
+            ],
+        });
+        let render_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("render.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(RENDER_WGSL.into()),
+        });
+        let outline_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("outline.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(OUTLINE_WGSL.into()),
+        });
+        let main_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("main"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&patch_layout)],
+            immediate_size: 0,
+        });
+        let main = |label: &str, entry: &str, targets: &[Option<ColorTargetState>]| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&main_layout),
+                vertex: wgpu::VertexState {
+                    module: &render_module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    front_face: wgpu::FrontFace::Ccw,
+                    // Scans are not reliably oriented; back faces are shaded two-sided.
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &render_module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let image = main(
+            "image",
+            "fs_image",
+            &[target(COLOR_FORMAT), target(MASK_FORMAT)],
+        );
+        let buffers = main(
+            "buffers",
+            "fs_buffers",
+            &[
+                target(COLOR_FORMAT),
+                target(NORMAL_FORMAT),
+                target(IDS_FORMAT),
+            ],
+        );
+        let post_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("outline"),
+            bind_group_layouts: &[Some(&outline_layout)],
+            immediate_size: 0,
+        });
+        let outline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("outline"),
+            layout: Some(&post_layout),
+            vertex: wgpu::VertexState {
+                module: &outline_module,
+                entry_point: Some("vs_full"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &outline_module,
+                entry_point: Some("fs_outline"),
+                compilation_options: Default::default(),
+                targets: &[target(COLOR_FORMAT)],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Pipelines {
+            frame_layout,
+            patch_layout,
+            outline_layout,
+            image,
+            buffers,
+            outline,
+        }
+    }
+}

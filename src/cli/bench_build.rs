@@ -1,0 +1,199 @@
+//! `meshwiki bench build FILE`: builds the LOD hierarchy of a scan (or of `synth:N`, the
+//! generated relief of about N triangles, written as PLY first and not timed) into a scratch
+//! directory and prints throughput (input triangles/s), peak memory, output bytes per input
+//! triangle and output size, with ratios to the reference: Nexus' `nxsbuild` on the same
+//! machine kind (2 cores) building the relief of `../shared/tools/make_mesh.py`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args as ClapArgs;
+use meshwiki::jobs::{Source, parse_size, run_build};
+use meshwiki_engine::lod::BuildOptions;
+use meshwiki_engine::mesh::write_relief_ply;
+
+use super::import::{Bar, check_input, print_summary};
+
+/// Options of `bench build`.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct Args {
+    /// The scan, or `synth:N` for the generated relief of about N triangles.
+    pub file: String,
+    /// Memory budget of the build (e.g. 512M, 1G).
+    #[arg(long, default_value = "1G", value_parser = parse_size)]
+    pub memory: u64,
+    /// Triangle budget of every patch.
+    #[arg(long, default_value_t = 4096)]
+    pub max_patch_triangles: u32,
+    /// Build threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Keep the LOD file here (default: a scratch directory, removed afterwards).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// One reference measurement of `nxsbuild`.
+struct Reference {
+    triangles: u64,
+    seconds: (f64, f64),
+    peak_bytes: f64,
+    output_bytes: f64,
+}
+
+/// `nxsbuild` on the relief of `make_mesh.py --tris N`, on this machine kind.
+const REFERENCES: [Reference; 2] = [
+    Reference {
+        triangles: 1_000_000,
+        seconds: (19.0, 19.0),
+        peak_bytes: 244e6,
+        output_bytes: 5.6e6,
+    },
+    Reference {
+        triangles: 5_000_000,
+        seconds: (110.0, 125.0),
+        peak_bytes: 719e6,
+        output_bytes: 28.3e6,
+    },
+];
+
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn compare(triangles: u64, seconds: f64, peak: Option<u64>, output: u64) {
+    let Some(r) = REFERENCES.iter().min_by(|a, b| {
+        let d = |x: &Reference| (x.triangles as f64 / triangles.max(1) as f64).ln().abs();
+        d(a).total_cmp(&d(b))
+    }) else {
+        return;
+    };
+    let (lo, hi) = r.seconds;
+    let time = if lo == hi {
+        format!("{lo:.0} s")
+    } else {
+        format!("{lo:.0}–{hi:.0} s")
+    };
+    println!(
+        "reference: nxsbuild on the {:.0}M-triangle relief (make_mesh.py, same machine kind): \
+         {time}, {:.0} MB peak, {:.1} MB .nxz",
+        r.triangles as f64 / 1e6,
+        r.peak_bytes / 1e6,
+        r.output_bytes / 1e6
+    );
+    let scale = triangles as f64 / r.triangles as f64;
+    if (scale - 1.0).abs() > 0.1 {
+        println!(
+            "  (this input has {triangles} triangles: throughput and bytes per triangle are \
+             compared per triangle, memory as measured)"
+        );
+    }
+    let ours = triangles as f64 / seconds.max(1e-9);
+    let (fast, slow) = (r.triangles as f64 / lo, r.triangles as f64 / hi);
+    if lo == hi {
+        println!("  throughput   {:.2}× nxsbuild's", ours / fast);
+    } else {
+        println!(
+            "  throughput   {:.2}× nxsbuild's ({:.2}–{:.2}× over its range)",
+            ours / ((fast + slow) / 2.0),
+            ours / fast,
+            ours / slow
+        );
+    }
+    if let Some(p) = peak {
+        println!("  peak memory  {:.2}× nxsbuild's", p as f64 / r.peak_bytes);
+    }
+    let per_tri = output as f64 / triangles.max(1) as f64;
+    println!(
+        "  output size  {:.2}× the .nxz ({:.2} vs {:.2} bytes per triangle)",
+        per_tri / (r.output_bytes / r.triangles as f64),
+        per_tri,
+        r.output_bytes / r.triangles as f64
+    );
+}
+
+/// Runs `bench build`.
+pub async fn run(args: Args) -> anyhow::Result<()> {
+    tokio::task::spawn_blocking(move || bench(&args))
+        .await
+        .context("benchmark crashed")?
+}
+
+fn bench(args: &Args) -> anyhow::Result<()> {
+    let dir = std::env::temp_dir().join(format!("meshwiki-bench-build-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let _scratch = Scratch(dir.clone());
+    let input = match args.file.strip_prefix("synth:") {
+        Some(n) => {
+            let n: u64 = n
+                .trim()
+                .replace('_', "")
+                .parse()
+                .with_context(|| format!("synth:N needs a triangle count, got {:?}", args.file))?;
+            let path = dir.join("relief.ply");
+            let t = std::time::Instant::now();
+            let (v, tris) = write_relief_ply(&path, n).context("cannot write the relief")?;
+            eprintln!(
+                "generated relief: {tris} triangles, {v} vertices in {:.1} s (not timed)",
+                t.elapsed().as_secs_f64()
+            );
+            path
+        }
+        None => {
+            let path = PathBuf::from(&args.file);
+            check_input(&path)?;
+            path
+        }
+    };
+    let output = match &args.out {
+        Some(p) => p.clone(),
+        None => dir.join("bench.mwlod"),
+    };
+    let options = BuildOptions {
+        max_patch_triangles: args.max_patch_triangles as usize,
+        memory_budget: args.memory.min(usize::MAX as u64) as usize,
+        threads: args.threads,
+        ..BuildOptions::default()
+    };
+    let bytes = std::fs::metadata(&input).map(|m| m.len()).unwrap_or(0);
+    println!(
+        "bench build: {} ({:.1} MB), memory budget {:.0} MB, {} threads",
+        display(&input),
+        bytes as f64 / 1e6,
+        args.memory as f64 / 1e6,
+        args.threads
+            .map(|t| t.to_string())
+            .unwrap_or_else(|| format!(
+                "{}",
+                std::thread::available_parallelism().map_or(1, |n| n.get())
+            ))
+    );
+    let bar = Bar::new();
+    let report = run_build(&Source::File(input.clone()), &output, &options, &bar);
+    bar.0.finish_and_clear();
+    let report = match report {
+        Ok(r) => r.report,
+        Err(e) => bail!("build failed: {e}"),
+    };
+    print_summary(&report);
+    compare(
+        report.import.triangles,
+        report.seconds,
+        report.peak_rss_bytes,
+        report.output_bytes,
+    );
+    if args.out.is_some() {
+        println!("LOD file kept at {}", output.display());
+    }
+    Ok(())
+}
+
+fn display(p: &Path) -> String {
+    p.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| p.display().to_string())
+}

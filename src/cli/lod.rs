@@ -1,0 +1,114 @@
+//! `meshwiki lod build|dump`: developer tools for `.mwlod` files. `build` writes a LOD file
+//! from a scan; `dump` prints the tables and decoded patches (the reference decoder) as JSON,
+//! which the browser decoder's tests compare against.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use meshwiki_engine::lod::{self, BuildOptions, LodFile};
+use meshwiki_engine::progress::NoProgress;
+use serde_json::json;
+
+/// `lod` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum LodCommand {
+    /// Build a `.mwlod` file from a scan (PLY, OBJ, OFF, STL, glTF/GLB).
+    Build(BuildArgs),
+    /// Print a `.mwlod` file's header and decoded patches as JSON.
+    Dump(DumpArgs),
+}
+
+/// Arguments of `lod build`.
+#[derive(Debug, Args)]
+pub struct BuildArgs {
+    /// The scan.
+    pub input: PathBuf,
+    /// The LOD file to write.
+    pub output: PathBuf,
+}
+
+/// Arguments of `lod dump`.
+#[derive(Debug, Args)]
+pub struct DumpArgs {
+    /// The LOD file.
+    pub file: PathBuf,
+    /// Comma-separated node ids to decode (default: every node).
+    #[arg(long, value_delimiter = ',')]
+    pub nodes: Vec<u32>,
+    /// Write the JSON here instead of standard output.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Runs a `lod` subcommand.
+pub fn run(command: LodCommand) -> anyhow::Result<()> {
+    match command {
+        LodCommand::Build(args) => {
+            let report = lod::build_file(
+                &args.input,
+                &args.output,
+                &BuildOptions::default(),
+                &NoProgress,
+            )
+            .with_context(|| format!("cannot build {}", args.input.display()))?;
+            println!(
+                "{}: {} nodes, {} levels, {} bytes",
+                args.output.display(),
+                report.nodes,
+                report.levels,
+                report.output_bytes
+            );
+            Ok(())
+        }
+        LodCommand::Dump(args) => dump(args),
+    }
+}
+
+fn dump(args: DumpArgs) -> anyhow::Result<()> {
+    let file = LodFile::open(&args.file)
+        .with_context(|| format!("cannot open {}", args.file.display()))?;
+    let header = file.header();
+    let nodes: Vec<u32> = if args.nodes.is_empty() {
+        (0..header.node_count).collect()
+    } else {
+        args.nodes.clone()
+    };
+    let mut patches = Vec::with_capacity(nodes.len());
+    for id in nodes {
+        let patch = file.patch(id)?;
+        let record = file.node(id)?;
+        patches.push(json!({
+            "node": id,
+            "offset": record.blob_offset,
+            "length": record.blob_len,
+            "original_ids": patch.original_ids,
+            "grid_positions": patch.grid_positions,
+            "positions": patch.positions,
+            "indices": patch.indices,
+            "colors": patch.colors,
+            "normals": patch.normals,
+        }));
+    }
+    let grid = file.grid();
+    let out = json!({
+        "node_count": header.node_count,
+        "group_count": header.group_count,
+        "grid": {"origin": grid.origin, "step": grid.step},
+        "has_colors": file.has_colors(),
+        "has_normals": file.has_normals(),
+        "patches": patches,
+    });
+    let text = serde_json::to_string(&out)?;
+    match args.out {
+        Some(path) => std::fs::write(&path, text)
+            .with_context(|| format!("cannot write {}", path.display()))?,
+        None => {
+            let mut stdout = std::io::stdout().lock();
+            stdout.write_all(text.as_bytes())?;
+            stdout.write_all(b"\n")?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,169 @@
+//! Command-line interface. One file per subcommand; add a variant to [`Command`] (or to
+//! [`BenchCommand`]) and a match arm in [`run`] to extend it. Every subcommand takes
+//! `--data-dir` (env `MESHWIKI_DATA_DIR`); settings also come from `MESHWIKI_*` variables.
+
+pub mod bench_build;
+pub mod bench_maxflow;
+pub mod bench_render;
+pub mod bench_search;
+pub mod demo;
+pub mod export_cut;
+pub mod import;
+pub mod lod;
+pub mod reindex;
+pub mod serve;
+pub mod user;
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+use meshwiki::Settings;
+use meshwiki::config::{DEFAULT_BIND, DEFAULT_DATA_DIR};
+
+/// meshwiki: a knowledge server that attaches wiki information to regions of huge 3D scans.
+#[derive(Debug, Parser)]
+#[command(name = "meshwiki", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Serve the web UI and JSON API.
+    Serve(ServerArgs),
+    /// Manage user accounts.
+    #[command(subcommand)]
+    User(UserCommand),
+    /// Rebuild the full-text search index from the database (stop the server first).
+    Reindex(DataDirArgs),
+    /// Create (or reset) the demo admin, print its password, seed demo content and (first
+    /// run) build the generated demo scan in the background, serve.
+    Demo(demo::DemoArgs),
+    /// Import a scan: create a model and build its LOD hierarchy, with a progress bar.
+    Import(import::Args),
+    /// Write the mesh of one cut through a model's hierarchy as binary PLY (`original_id`).
+    ExportCut(export_cut::Args),
+    /// Benchmarks (figures are printed, never asserted).
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Developer tools for `.mwlod` files (build one from a scan, dump it as JSON).
+    #[command(subcommand)]
+    Lod(lod::LodCommand),
+}
+
+/// `user` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum UserCommand {
+    /// Add a user; the password is read from standard input.
+    Add(user::AddArgs),
+}
+
+/// `bench` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Index generated contents and measure query latency.
+    Search(bench_search::Args),
+    /// Build a scan's LOD hierarchy: throughput, peak memory, output size vs nxsbuild.
+    Build(bench_build::Args),
+    /// The max-flow solver on the reference grid instances (`../shared/data/maxflow`).
+    Maxflow {
+        /// Directory of the instances or their archive (default `../shared/data/maxflow`).
+        dir: Option<PathBuf>,
+    },
+    /// Server-side rendering of a camera path (`.mwlod`, a scan, or `synth:N`).
+    Render {
+        /// The model: a `.mwlod` file, a scan file or `synth:N`.
+        model: PathBuf,
+        /// Write a few frames and a JSON summary here.
+        out_dir: Option<PathBuf>,
+    },
+}
+
+/// The data directory.
+#[derive(Debug, Clone, Args)]
+pub struct DataDirArgs {
+    /// Data directory (database, search index, attachments, models).
+    #[arg(long, env = "MESHWIKI_DATA_DIR", default_value = DEFAULT_DATA_DIR)]
+    pub data_dir: PathBuf,
+}
+
+/// Options of the HTTP server.
+#[derive(Debug, Clone, Args)]
+pub struct ServerArgs {
+    /// Data directory.
+    #[command(flatten)]
+    pub data: DataDirArgs,
+    /// Address to listen on (port 0 picks a free port).
+    #[arg(long, env = "MESHWIKI_BIND", default_value = DEFAULT_BIND)]
+    pub bind: String,
+    /// Largest attachment upload, in MiB.
+    #[arg(long, env = "MESHWIKI_MAX_UPLOAD_MB", default_value_t = 64)]
+    pub max_upload_mb: u64,
+    /// Largest JSON request body, in KiB.
+    #[arg(long, env = "MESHWIKI_MAX_JSON_KB", default_value_t = 2048)]
+    pub max_json_kb: usize,
+    /// Mark the session cookie Secure (serve behind HTTPS).
+    #[arg(long, env = "MESHWIKI_COOKIE_SECURE")]
+    pub cookie_secure: bool,
+    /// HTTP worker threads (0: one per core).
+    #[arg(long, env = "MESHWIKI_WORKERS", default_value_t = 0)]
+    pub workers: usize,
+    /// Session lifetime in hours.
+    #[arg(long, env = "MESHWIKI_SESSION_HOURS", default_value_t = 336)]
+    pub session_hours: i64,
+    /// Largest model (scan) upload, in MiB.
+    #[arg(long, env = "MESHWIKI_MAX_MODEL_UPLOAD_MB", default_value_t = 65536)]
+    pub max_model_upload_mb: u64,
+    /// LOD builds run at the same time.
+    #[arg(long, env = "MESHWIKI_BUILD_WORKERS", default_value_t = 1)]
+    pub build_workers: usize,
+    /// Memory budget of one LOD build (e.g. 512M, 1G).
+    #[arg(long, env = "MESHWIKI_BUILD_MEMORY", default_value = "1G", value_parser = meshwiki::jobs::parse_size)]
+    pub build_memory: u64,
+    /// Threads of one LOD build (0: all cores).
+    #[arg(long, env = "MESHWIKI_BUILD_THREADS", default_value_t = 0)]
+    pub build_threads: usize,
+}
+
+impl ServerArgs {
+    /// Settings from these options.
+    pub fn settings(&self) -> Settings {
+        let mut s = Settings::new(&self.data.data_dir);
+        s.bind = self.bind.clone();
+        s.cookie_secure = self.cookie_secure;
+        s.workers = self.workers;
+        s.limits.upload_bytes = self.max_upload_mb.max(1) * 1024 * 1024;
+        s.limits.json_body = self.max_json_kb.max(16) * 1024;
+        s.limits.session_ttl_secs = self.session_hours.clamp(1, 24 * 365) * 3600;
+        s.build.upload_bytes = self.max_model_upload_mb.max(1).saturating_mul(1024 * 1024);
+        s.build.workers = self.build_workers.clamp(1, 64);
+        s.build.memory_budget = self.build_memory.max(64 << 20);
+        s.build.threads = (self.build_threads > 0).then_some(self.build_threads);
+        s
+    }
+}
+
+/// Runs a parsed command line.
+pub async fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Serve(args) => serve::run(args).await,
+        Command::User(UserCommand::Add(args)) => user::add(args).await,
+        Command::Reindex(args) => reindex::run(args).await,
+        Command::Demo(args) => demo::run(args).await,
+        Command::Import(args) => import::run(args).await,
+        Command::ExportCut(args) => export_cut::run(args).await,
+        Command::Bench(BenchCommand::Search(args)) => bench_search::run(args).await,
+        Command::Bench(BenchCommand::Build(args)) => bench_build::run(args).await,
+        Command::Bench(BenchCommand::Maxflow { dir }) => {
+            tokio::task::spawn_blocking(move || bench_maxflow::run(dir.as_deref())).await?
+        }
+        Command::Bench(BenchCommand::Render { model, out_dir }) => {
+            tokio::task::spawn_blocking(move || bench_render::run(&model, out_dir.as_deref()))
+                .await?
+        }
+        Command::Lod(command) => lod::run(command),
+    }
+}

@@ -1,0 +1,166 @@
+//! Settings: where the data directory lives, what it contains, and the server's limits.
+//!
+//! Layout of the data directory:
+//! ```text
+//! meshwiki.db            SQLite database (WAL)
+//! index/                 tantivy full-text index
+//! attachments/ab/cdef..  attachment files, content-addressed by SHA-256
+//! models/                LOD files of imported scans (`<model id>.mwlod`)
+//! uploads/               files being received, and uploaded scans awaiting their build
+//! ```
+
+use std::path::{Path, PathBuf};
+
+/// Default bind address of `meshwiki serve`.
+pub const DEFAULT_BIND: &str = "127.0.0.1:8080";
+/// Default data directory.
+pub const DEFAULT_DATA_DIR: &str = "./data";
+
+/// Size and time limits of the server.
+#[derive(Debug, Clone)]
+pub struct Limits {
+    /// Largest JSON request body, in bytes.
+    pub json_body: usize,
+    /// Largest URL-encoded form body, in bytes.
+    pub form_body: usize,
+    /// Largest uploaded attachment, in bytes.
+    pub upload_bytes: u64,
+    /// Longest title, in characters.
+    pub title_chars: usize,
+    /// Longest content body, in bytes.
+    pub body_bytes: usize,
+    /// Largest number of vertex ids in a region part.
+    pub part_vertices: usize,
+    /// Session lifetime in seconds.
+    pub session_ttl_secs: i64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            json_body: 2 * 1024 * 1024,
+            form_body: 2 * 1024 * 1024,
+            upload_bytes: 64 * 1024 * 1024,
+            title_chars: 300,
+            body_bytes: 1024 * 1024,
+            part_vertices: 50_000_000,
+            session_ttl_secs: 14 * 24 * 3600,
+        }
+    }
+}
+
+/// Settings of background LOD builds (jobs) and model uploads.
+#[derive(Debug, Clone)]
+pub struct BuildSettings {
+    /// Builds run at the same time.
+    pub workers: usize,
+    /// Memory budget of one build, in bytes.
+    pub memory_budget: u64,
+    /// Worker threads of one build (`None`: all cores).
+    pub threads: Option<usize>,
+    /// Triangle budget of a patch.
+    pub max_patch_triangles: u32,
+    /// Largest model upload, in bytes.
+    pub upload_bytes: u64,
+}
+
+impl Default for BuildSettings {
+    fn default() -> Self {
+        BuildSettings {
+            workers: 1,
+            memory_budget: 1 << 30,
+            threads: None,
+            max_patch_triangles: 4096,
+            upload_bytes: 64 << 30,
+        }
+    }
+}
+
+/// Server settings, built by the CLI from flags and `MESHWIKI_*` environment variables.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Root of the data directory.
+    pub data_dir: PathBuf,
+    /// Address the HTTP server binds to.
+    pub bind: String,
+    /// Mark the session cookie `Secure` (set when served over HTTPS).
+    pub cookie_secure: bool,
+    /// Number of HTTP worker threads (0: one per core).
+    pub workers: usize,
+    /// Limits.
+    pub limits: Limits,
+    /// Background builds.
+    pub build: BuildSettings,
+}
+
+impl Settings {
+    /// Settings for `data_dir` with every other value at its default.
+    pub fn new(data_dir: impl Into<PathBuf>) -> Self {
+        Settings {
+            data_dir: data_dir.into(),
+            bind: DEFAULT_BIND.to_string(),
+            cookie_secure: false,
+            workers: 0,
+            limits: Limits::default(),
+            build: BuildSettings::default(),
+        }
+    }
+
+    /// The SQLite database file.
+    pub fn db_path(&self) -> PathBuf {
+        self.data_dir.join("meshwiki.db")
+    }
+
+    /// The tantivy index directory.
+    pub fn index_dir(&self) -> PathBuf {
+        self.data_dir.join("index")
+    }
+
+    /// Root of the content-addressed attachment store.
+    pub fn attachments_dir(&self) -> PathBuf {
+        self.data_dir.join("attachments")
+    }
+
+    /// Directory reserved for LOD files of imported models.
+    pub fn models_dir(&self) -> PathBuf {
+        self.data_dir.join("models")
+    }
+
+    /// Directory for files being received (temporary names, renamed when complete).
+    pub fn uploads_dir(&self) -> PathBuf {
+        self.data_dir.join("uploads")
+    }
+
+    /// Path of the attachment with the given SHA-256 (hex): `attachments/ab/cdef...`.
+    /// Returns `None` unless `sha256` is 64 lower-case hex digits, so no caller-supplied
+    /// string can ever become a path.
+    pub fn attachment_path(&self, sha256: &str) -> Option<PathBuf> {
+        if sha256.len() != 64
+            || !sha256
+                .bytes()
+                .all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+        {
+            return None;
+        }
+        Some(self.attachments_dir().join(&sha256[..2]).join(&sha256[2..]))
+    }
+
+    /// Creates the data directory and its sub-directories.
+    pub fn ensure_dirs(&self) -> std::io::Result<()> {
+        for dir in [
+            self.data_dir.clone(),
+            self.index_dir(),
+            self.attachments_dir(),
+            self.models_dir(),
+            self.uploads_dir(),
+        ] {
+            std::fs::create_dir_all(&dir)?;
+        }
+        Ok(())
+    }
+
+    /// The data directory.
+    pub fn data_dir(&self) -> &Path {
+        &self.data_dir
+    }
+}

@@ -1,0 +1,918 @@
+//! Background jobs: LOD builds of uploaded scans, of the demo relief, and (run in their own
+//! process) of `meshwiki import`.
+//!
+//! * A job is created `queued` with its model (`pending`) in one transaction
+//!   ([`Jobs::submit_upload`], [`Jobs::submit_demo`]). Workers (one by default,
+//!   `BuildSettings::workers`) claim the oldest queued job and build it on a blocking thread
+//!   ([`meshwiki_engine::lod::build_file`]) into `models/<model id>.mwlod`, written under a
+//!   temporary name and renamed when complete.
+//! * Progress goes through [`JobProgress`] (atomics) and a ticker task that writes it to the
+//!   database a few times a second and reads back cancellation requests, so cancelling works
+//!   from any process ([`Jobs::cancel`]).
+//! * The end is one transaction: job `done` and model `ready` with its statistics and
+//!   thumbnail, or job `failed`/`cancelled` and model `failed` with the message. Uploaded
+//!   inputs are removed once their job ends; the engine removes its scratch on every error.
+//! * On start ([`Jobs::start`]) jobs left `running` by a crash are queued again and what a
+//!   killed build left behind (`models/.<name>.build-<pid>`, `models/*.tmp-<pid>`, unclaimed
+//!   uploads) is removed. On shutdown running builds are stopped and queued again.
+
+pub mod progress;
+pub mod thumbnail;
+
+use std::collections::HashMap;
+use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use meshwiki_engine::lod::{BuildError, BuildOptions, BuildReport, LodFile, build_from};
+use meshwiki_engine::mesh::{
+    ImportError, ImportErrorKind, ImportStats, MeshSink, SourceInfo, VertexBatch, synth,
+};
+use meshwiki_engine::progress::Progress;
+use serde::Serialize;
+use tokio::sync::{Notify, broadcast};
+
+pub use progress::JobProgress;
+
+use crate::config::Settings;
+use crate::search::SearchIndex;
+use crate::store::attachments::{self, NewAttachment};
+use crate::store::jobs::{
+    self, BuiltModel, CancelOutcome, Job, JobKind, JobOptions, JobStatus, NewJob,
+};
+use crate::store::models::{BBox, Model, NewModel};
+use crate::store::{Db, StoreError};
+
+/// How often a running job's progress is written to the database.
+const TICK: Duration = Duration::from_millis(400);
+/// How long an idle worker waits before looking at the queue again.
+const IDLE_POLL: Duration = Duration::from_secs(5);
+/// How long shutdown waits for running builds to stop.
+const SHUTDOWN_WAIT: Duration = Duration::from_secs(30);
+/// Temporary files in `uploads/` older than this are leftovers at start-up.
+const STALE_TMP: Duration = Duration::from_secs(60);
+
+/// Errors of the job runner.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// The database failed.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// A file operation failed.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+    /// Invalid input.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// A change of a job, for live displays (`Jobs::subscribe`).
+#[derive(Debug, Clone, Serialize)]
+pub struct JobEvent {
+    /// Job id.
+    pub id: i64,
+    /// Its model.
+    pub model_id: Option<i64>,
+    /// State.
+    pub status: JobStatus,
+    /// Stage.
+    pub stage: String,
+    /// Units of the stage done.
+    pub done: i64,
+    /// Units of the stage in all.
+    pub total: i64,
+    /// Estimate of the whole job, 0–100.
+    pub percent: f64,
+    /// Error or status message.
+    pub message: Option<String>,
+}
+
+impl From<&Job> for JobEvent {
+    fn from(j: &Job) -> JobEvent {
+        JobEvent {
+            id: j.id,
+            model_id: j.model_id,
+            status: j.status,
+            stage: j.stage.clone(),
+            done: j.done,
+            total: j.total,
+            percent: j.percent,
+            message: j.message.clone(),
+        }
+    }
+}
+
+/// How a job ended.
+#[derive(Debug, Clone)]
+pub enum JobEnd {
+    /// Built; the model is ready.
+    Done(Box<BuildReport>),
+    /// Failed with this message.
+    Failed(String),
+    /// Cancelled.
+    Cancelled,
+    /// Stopped by a shutdown and queued again.
+    Requeued,
+}
+
+/// What a build reads.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A scan file (format from its extension).
+    File(PathBuf),
+    /// The generated demo relief of about this many triangles.
+    Demo(u64),
+}
+
+/// The job runner, shared by the server (workers) and `meshwiki import` (one job run in place).
+#[derive(Clone)]
+pub struct Jobs {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    db: Db,
+    settings: Arc<Settings>,
+    search: Option<SearchIndex>,
+    wake: Notify,
+    running: Mutex<HashMap<i64, Arc<JobProgress>>>,
+    shutdown: AtomicBool,
+    workers: Mutex<Vec<tokio::task::JoinHandle<()>>>,
+    events: broadcast::Sender<JobEvent>,
+}
+
+impl std::fmt::Debug for Jobs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Jobs")
+            .field("running", &self.running_ids())
+            .finish()
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Whether process `pid` is alive (Linux: `/proc/<pid>`; elsewhere only this process).
+pub fn process_alive(pid: i64) -> bool {
+    if pid == std::process::id() as i64 {
+        return true;
+    }
+    cfg!(target_os = "linux") && pid > 0 && Path::new("/proc").join(pid.to_string()).exists()
+}
+
+/// Parses a byte size: `1073741824`, `512M`, `1G`, `1.5GiB`, `800MB` (binary units).
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let value: f64 = num
+        .parse()
+        .map_err(|_| format!("invalid size {s:?}: expected e.g. 512M or 1G"))?;
+    let mult: u64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1,
+        "k" | "kb" | "kib" => 1 << 10,
+        "m" | "mb" | "mib" => 1 << 20,
+        "g" | "gb" | "gib" => 1 << 30,
+        "t" | "tb" | "tib" => 1 << 40,
+        other => return Err(format!("invalid size unit {other:?} in {s:?}")),
+    };
+    let bytes = value * mult as f64;
+    if !bytes.is_finite() || bytes < 1.0 || bytes > u64::MAX as f64 / 2.0 {
+        return Err(format!("size {s:?} out of range"));
+    }
+    Ok(bytes as u64)
+}
+
+/// The extension of an uploaded file name, if it names a format the importer reads.
+/// The name is used for nothing else.
+pub fn scan_extension(file_name: &str) -> Option<String> {
+    let last = file_name.rsplit(['/', '\\']).next().unwrap_or("");
+    let ext = Path::new(last).extension()?.to_str()?.to_ascii_lowercase();
+    meshwiki_engine::mesh::Format::from_path(Path::new(&format!("x.{ext}")))?;
+    Some(ext)
+}
+
+/// File extensions the importer reads.
+pub const SCAN_EXTENSIONS: &str = ".ply, .obj, .gltf, .glb, .stl or .off";
+
+/// A finished build: the engine's report and the exact bounds of the input.
+#[derive(Debug, Clone)]
+pub struct Built {
+    /// The engine's report.
+    pub report: BuildReport,
+    /// Smallest input coordinates.
+    pub bbox_min: [f32; 3],
+    /// Largest input coordinates.
+    pub bbox_max: [f32; 3],
+}
+
+/// Builds the LOD file of `source` at `output` (temporary name, renamed when complete).
+pub fn run_build(
+    source: &Source,
+    output: &Path,
+    options: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<Built, BuildError> {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    let report = match source {
+        Source::File(path) => build_from(
+            |sink| {
+                let mut s = InputSink {
+                    sink,
+                    progress,
+                    count: false,
+                    lo: &mut lo,
+                    hi: &mut hi,
+                };
+                meshwiki_engine::mesh::import(path, &mut s, progress)
+            },
+            output,
+            options,
+            progress,
+        )?,
+        Source::Demo(triangles) => {
+            let relief = synth::Relief::new(*triangles, synth::DEFAULT_SEED);
+            let stats = ImportStats {
+                vertices: relief.vertex_count(),
+                triangles: relief.triangle_count(),
+                has_colors: true,
+                ..ImportStats::default()
+            };
+            build_from(
+                |sink| {
+                    progress.stage(progress::GENERATE_STAGE, relief.triangle_count());
+                    let mut s = InputSink {
+                        sink,
+                        progress,
+                        count: true,
+                        lo: &mut lo,
+                        hi: &mut hi,
+                    };
+                    relief.stream(&mut s)?;
+                    Ok(stats)
+                },
+                output,
+                options,
+                progress,
+            )?
+        }
+    };
+    if lo.iter().any(|v| !v.is_finite()) {
+        (lo, hi) = (report.bbox_min, report.bbox_max);
+    }
+    Ok(Built {
+        report,
+        bbox_min: lo,
+        bbox_max: hi,
+    })
+}
+
+/// Passes the input on to the builder, keeping its exact bounds; with `count`, reports
+/// triangles as progress and stops when cancelled (readers do that themselves).
+struct InputSink<'a> {
+    sink: &'a mut dyn MeshSink,
+    progress: &'a dyn Progress,
+    count: bool,
+    lo: &'a mut [f32; 3],
+    hi: &'a mut [f32; 3],
+}
+
+impl MeshSink for InputSink<'_> {
+    fn begin(&mut self, info: &SourceInfo) -> Result<(), ImportError> {
+        self.sink.begin(info)
+    }
+
+    fn vertices(&mut self, batch: VertexBatch<'_>) -> Result<(), ImportError> {
+        for p in batch.positions {
+            for k in 0..3 {
+                self.lo[k] = self.lo[k].min(p[k]);
+                self.hi[k] = self.hi[k].max(p[k]);
+            }
+        }
+        self.sink.vertices(batch)
+    }
+
+    fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
+        if !self.count {
+            return self.sink.triangles(triangles);
+        }
+        if self.progress.cancelled() {
+            return Err(ImportError::new(
+                Path::new("demo relief"),
+                meshwiki_engine::mesh::Location::File,
+                ImportErrorKind::Cancelled,
+            ));
+        }
+        self.progress.advance(triangles.len() as u64);
+        self.sink.triangles(triangles)
+    }
+}
+
+/// `models/<id>.mwlod`, relative to the data directory.
+pub fn lod_relative_path(model_id: i64) -> String {
+    format!("models/{model_id}.mwlod")
+}
+
+/// A path relative to the data directory made only of plain components.
+fn plain_relative(rel: &str) -> Option<&Path> {
+    let p = Path::new(rel);
+    (p.components().count() >= 2 && p.components().all(|c| matches!(c, Component::Normal(_))))
+        .then_some(p)
+}
+
+/// A received upload: a complete file in `uploads/` under a temporary name.
+#[derive(Debug)]
+pub struct ReceivedScan {
+    /// The temporary file (moved into place by [`Jobs::submit_upload`]).
+    pub temp_path: PathBuf,
+    /// Its size.
+    pub bytes: u64,
+    /// Lower-case extension (checked with [`scan_extension`]).
+    pub extension: String,
+    /// Display name (sanitised uploader's file name).
+    pub display_name: String,
+}
+
+impl Jobs {
+    /// A runner over `db` (nothing starts until [`Jobs::start`]); `search` is kept in step
+    /// with what jobs write (the demo model's seeded content).
+    pub fn new(db: Db, settings: Arc<Settings>, search: Option<SearchIndex>) -> Jobs {
+        Jobs {
+            inner: Arc::new(Inner {
+                db,
+                settings,
+                search,
+                wake: Notify::new(),
+                running: Mutex::new(HashMap::new()),
+                shutdown: AtomicBool::new(false),
+                workers: Mutex::new(Vec::new()),
+                events: broadcast::channel(256).0,
+            }),
+        }
+    }
+
+    /// Ids of the jobs this process is running.
+    pub fn running_ids(&self) -> Vec<i64> {
+        lock(&self.inner.running).keys().copied().collect()
+    }
+
+    /// Live job changes (progress and state), for push displays.
+    pub fn subscribe(&self) -> broadcast::Receiver<JobEvent> {
+        self.inner.events.subscribe()
+    }
+
+    fn emit(&self, job: &Job) {
+        let _ = self.inner.events.send(JobEvent::from(job));
+    }
+
+    async fn emit_id(&self, id: i64) {
+        if let Ok(job) = jobs::get(&self.inner.db, id).await {
+            self.emit(&job);
+        }
+    }
+
+    /// Recovers from a crash (jobs left running are queued again, leftovers removed) and
+    /// starts the workers. Call once, in the server, before serving.
+    pub async fn start(&self) -> Result<jobs::Recovered, JobError> {
+        let recovered = jobs::recover(&self.inner.db, process_alive).await?;
+        for id in &recovered.requeued {
+            tracing::warn!(job = id, "build interrupted by a restart: queued again");
+        }
+        for id in &recovered.failed {
+            tracing::warn!(job = id, "meshwiki import process gone: job failed");
+        }
+        self.cleanup_leftovers().await?;
+        let n = self.inner.settings.build.workers.max(1);
+        let mut workers = lock(&self.inner.workers);
+        for k in 0..n {
+            let me = self.clone();
+            workers.push(tokio::spawn(async move { me.worker(k).await }));
+        }
+        Ok(recovered)
+    }
+
+    /// Wakes a worker (a job was queued).
+    pub fn wake(&self) {
+        self.inner.wake.notify_one();
+    }
+
+    /// Stops the workers: running builds are cancelled and queued again for the next start.
+    pub async fn shutdown(&self) {
+        self.inner.shutdown.store(true, Ordering::SeqCst);
+        for p in lock(&self.inner.running).values() {
+            p.cancel();
+        }
+        self.inner.wake.notify_waiters();
+        let handles: Vec<_> = lock(&self.inner.workers).drain(..).collect();
+        for h in handles {
+            if tokio::time::timeout(SHUTDOWN_WAIT, h).await.is_err() {
+                tracing::warn!("a build did not stop within {SHUTDOWN_WAIT:?}");
+            }
+        }
+    }
+
+    fn shutting_down(&self) -> bool {
+        self.inner.shutdown.load(Ordering::SeqCst)
+    }
+
+    async fn worker(&self, k: usize) {
+        let pid = std::process::id() as i64;
+        while !self.shutting_down() {
+            match jobs::claim_next(&self.inner.db, pid).await {
+                Ok(Some(job)) => {
+                    tracing::info!(worker = k, job = job.id, model = ?job.model_id, "build started");
+                    self.emit(&job);
+                    let end = self.execute(job, Arc::new(JobProgress::default())).await;
+                    tracing::debug!(worker = k, ?end, "build ended");
+                }
+                Ok(None) => {
+                    let _ = tokio::time::timeout(IDLE_POLL, self.inner.wake.notified()).await;
+                }
+                Err(e) => {
+                    tracing::error!(error = %e, "cannot claim a job");
+                    tokio::time::sleep(IDLE_POLL).await;
+                }
+            }
+        }
+    }
+
+    /// Stores an uploaded scan and queues its build; returns the new model and job.
+    pub async fn submit_upload(
+        &self,
+        scan: ReceivedScan,
+        model: &NewModel,
+        user_id: i64,
+    ) -> Result<(Model, Job), JobError> {
+        let name = format!("src-{}.{}", crate::random_hex(12), scan.extension);
+        let rel = format!("uploads/{name}");
+        let dest = self.inner.settings.uploads_dir().join(&name);
+        tokio::fs::rename(&scan.temp_path, &dest).await?;
+        let new = NewJob {
+            kind: JobKind::Upload,
+            source_path: Some(rel),
+            source_name: scan.display_name.clone(),
+            source_bytes: scan.bytes.min(i64::MAX as u64) as i64,
+            options: JobOptions::default(),
+            running_pid: None,
+        };
+        match jobs::create_with_model(&self.inner.db, model, &new, user_id).await {
+            Ok((model, job)) => {
+                tracing::info!(job = job.id, model = model.id, bytes = scan.bytes, "upload queued");
+                self.emit(&job);
+                self.wake();
+                Ok((model, job))
+            }
+            Err(e) => {
+                let _ = tokio::fs::remove_file(&dest).await;
+                Err(e.into())
+            }
+        }
+    }
+
+    /// Queues the build of the generated demo relief of about `triangles` triangles.
+    pub async fn submit_demo(
+        &self,
+        triangles: u64,
+        model: &NewModel,
+        user_id: i64,
+    ) -> Result<(Model, Job), JobError> {
+        let relief = synth::Relief::new(triangles, synth::DEFAULT_SEED);
+        let new = NewJob {
+            kind: JobKind::Demo,
+            source_path: None,
+            source_name: format!(
+                "generated relief ({} triangles)",
+                relief.triangle_count()
+            ),
+            source_bytes: 0,
+            options: JobOptions {
+                triangles: Some(triangles),
+                ..JobOptions::default()
+            },
+            running_pid: None,
+        };
+        let (model, job) = jobs::create_with_model(&self.inner.db, model, &new, user_id).await?;
+        self.emit(&job);
+        self.wake();
+        Ok((model, job))
+    }
+
+    /// Cancels job `id`: a queued job ends at once, a running one stops at its next check
+    /// (within a second or so).
+    pub async fn cancel(&self, id: i64, user_id: Option<i64>) -> Result<CancelOutcome, JobError> {
+        let outcome = jobs::request_cancel(&self.inner.db, id, user_id).await?;
+        match &outcome {
+            CancelOutcome::Cancelled(job) => {
+                self.remove_source(job).await;
+                self.emit(job);
+            }
+            CancelOutcome::Requested(job) => {
+                if let Some(p) = lock(&self.inner.running).get(&id) {
+                    p.cancel();
+                }
+                self.emit(job);
+            }
+            CancelOutcome::Finished(_) => {}
+        }
+        Ok(outcome)
+    }
+
+    /// Cancels every active job of a model (before the model is deleted).
+    pub async fn cancel_for_model(&self, model_id: i64, user_id: Option<i64>) -> Result<(), JobError> {
+        for job in jobs::active_for_model(&self.inner.db, model_id).await? {
+            self.cancel(job.id, user_id).await?;
+        }
+        Ok(())
+    }
+
+    fn build_options(&self, job: &Job) -> BuildOptions {
+        let b = &self.inner.settings.build;
+        BuildOptions {
+            max_patch_triangles: job.options.max_patch_triangles.unwrap_or(b.max_patch_triangles)
+                as usize,
+            memory_budget: job
+                .options
+                .memory_budget
+                .unwrap_or(b.memory_budget)
+                .min(usize::MAX as u64) as usize,
+            threads: job.options.threads.map(|t| t as usize).or(b.threads),
+            ..BuildOptions::default()
+        }
+    }
+
+    fn source_of(&self, job: &Job) -> Result<Source, String> {
+        match job.kind {
+            JobKind::Upload => job
+                .source_path
+                .as_deref()
+                .and_then(plain_relative)
+                .filter(|p| p.starts_with("uploads"))
+                .map(|p| Source::File(self.inner.settings.data_dir.join(p)))
+                .ok_or_else(|| "the uploaded file of this job is missing".to_string()),
+            JobKind::File => job
+                .source_path
+                .as_ref()
+                .map(|p| Source::File(PathBuf::from(p)))
+                .ok_or_else(|| "the job names no input file".to_string()),
+            JobKind::Demo => Ok(Source::Demo(job.options.triangles.unwrap_or(2_000_000))),
+        }
+    }
+
+    /// Removes the uploaded input of an upload job.
+    async fn remove_source(&self, job: &Job) {
+        if job.kind != JobKind::Upload {
+            return;
+        }
+        let Some(rel) = job.source_path.as_deref().and_then(plain_relative) else {
+            return;
+        };
+        if !rel.starts_with("uploads") {
+            return;
+        }
+        let path = self.inner.settings.data_dir.join(rel);
+        match tokio::fs::remove_file(&path).await {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove upload"),
+        }
+    }
+
+    /// Runs a claimed (`running`) job to its end: build, thumbnail, final transaction.
+    /// Used by the workers and, in its own process, by `meshwiki import`.
+    pub async fn execute(&self, job: Job, progress: Arc<JobProgress>) -> JobEnd {
+        lock(&self.inner.running).insert(job.id, progress.clone());
+        let ticker = {
+            let me = self.clone();
+            let (id, model_id, p) = (job.id, job.model_id, progress.clone());
+            tokio::spawn(async move { me.tick(id, model_id, p).await })
+        };
+        let end = match self.build(&job, &progress).await {
+            Ok(end) => end,
+            Err(e) => {
+                tracing::error!(job = job.id, error = %e, "job bookkeeping failed");
+                let msg = format!("build failed: {e}");
+                let _ = jobs::finish_failed(&self.inner.db, job.id, JobStatus::Failed, &msg).await;
+                JobEnd::Failed(msg)
+            }
+        };
+        ticker.abort();
+        lock(&self.inner.running).remove(&job.id);
+        self.emit_id(job.id).await;
+        end
+    }
+
+    /// Writes progress every [`TICK`] while it changes and picks up cancellation requests.
+    async fn tick(&self, id: i64, model_id: Option<i64>, progress: Arc<JobProgress>) {
+        let mut last = None;
+        let mut interval = tokio::time::interval(TICK);
+        interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            interval.tick().await;
+            let snap = progress.snapshot();
+            let cancel = if last.as_ref() != Some(&snap) {
+                let r = jobs::update_progress(&self.inner.db, id, &snap).await;
+                let _ = self.inner.events.send(JobEvent {
+                    id,
+                    model_id,
+                    status: JobStatus::Running,
+                    stage: snap.stage.clone(),
+                    done: snap.done,
+                    total: snap.total,
+                    percent: snap.percent,
+                    message: None,
+                });
+                last = Some(snap);
+                r
+            } else {
+                jobs::cancel_requested(&self.inner.db, id).await
+            };
+            match cancel {
+                Ok(true) => progress.cancel(),
+                Ok(false) => {}
+                Err(e) => tracing::warn!(job = id, error = %e, "cannot record progress"),
+            }
+        }
+    }
+
+    async fn build(&self, job: &Job, progress: &Arc<JobProgress>) -> Result<JobEnd, JobError> {
+        let db = &self.inner.db;
+        let Some(model_id) = job.model_id else {
+            jobs::finish_failed(db, job.id, JobStatus::Cancelled, "the model was deleted").await?;
+            return Ok(JobEnd::Cancelled);
+        };
+        let source = match self.source_of(job) {
+            Ok(s) => s,
+            Err(msg) => {
+                jobs::finish_failed(db, job.id, JobStatus::Failed, &msg).await?;
+                return Ok(JobEnd::Failed(msg));
+            }
+        };
+        let rel = lod_relative_path(model_id);
+        let output = self.inner.settings.data_dir.join(&rel);
+        let options = self.build_options(job);
+        let result = {
+            let (output, progress) = (output.clone(), progress.clone());
+            tokio::task::spawn_blocking(move || run_build(&source, &output, &options, &*progress))
+                .await
+        };
+        let Built {
+            report,
+            bbox_min,
+            bbox_max,
+        } = match result {
+            Ok(Ok(built)) => built,
+            Ok(Err(BuildError::Cancelled)) | Err(_) if self.shutting_down() => {
+                jobs::requeue(db, job.id).await?;
+                tracing::info!(job = job.id, "build stopped by shutdown: queued again");
+                return Ok(JobEnd::Requeued);
+            }
+            Ok(Err(BuildError::Cancelled)) => {
+                jobs::finish_failed(db, job.id, JobStatus::Cancelled, jobs::CANCELLED_MESSAGE)
+                    .await?;
+                self.remove_source(job).await;
+                tracing::info!(job = job.id, "build cancelled");
+                return Ok(JobEnd::Cancelled);
+            }
+            Ok(Err(e)) => {
+                let msg = self.describe_error(job, &e);
+                jobs::finish_failed(db, job.id, JobStatus::Failed, &msg).await?;
+                self.remove_source(job).await;
+                tracing::warn!(job = job.id, error = %msg, "build failed");
+                return Ok(JobEnd::Failed(msg));
+            }
+            Err(join) => {
+                let msg = format!("build crashed: {join}");
+                jobs::finish_failed(db, job.id, JobStatus::Failed, &msg).await?;
+                self.remove_source(job).await;
+                tracing::error!(job = job.id, error = %msg, "build crashed");
+                return Ok(JobEnd::Failed(msg));
+            }
+        };
+        progress.stage(progress::THUMBNAIL_STAGE, 1);
+        let thumbnail = match job.created_by {
+            Some(user) => self.thumbnail(model_id, &output, user).await,
+            None => None,
+        };
+        progress.advance(1);
+        let built = BuiltModel {
+            vertex_count: report.import.vertices.min(i64::MAX as u64) as i64,
+            triangle_count: report.import.triangles.min(i64::MAX as u64) as i64,
+            bbox: BBox {
+                min: bbox_min.map(f64::from),
+                max: bbox_max.map(f64::from),
+            },
+            lod_path: rel,
+            thumbnail_attachment_id: thumbnail,
+            report: serde_json::to_value(&report).unwrap_or_default(),
+        };
+        if !jobs::finish_done(db, job.id, model_id, &built).await? {
+            let _ = tokio::fs::remove_file(&output).await;
+            jobs::finish_failed(db, job.id, JobStatus::Cancelled, "the model was deleted").await?;
+            self.remove_source(job).await;
+            return Ok(JobEnd::Cancelled);
+        }
+        self.remove_source(job).await;
+        tracing::info!(
+            job = job.id,
+            model = model_id,
+            triangles = report.import.triangles,
+            nodes = report.nodes,
+            seconds = report.seconds,
+            "build done"
+        );
+        if job.kind == JobKind::Demo
+            && let Some(user) = job.created_by
+        {
+            let lod = output.clone();
+            match crate::seed::seed_demo_model(db, &self.inner.settings, model_id, &lod, user).await
+            {
+                Ok(true) => {
+                    tracing::info!(model = model_id, "seeded the demo model");
+                    if let Some(search) = &self.inner.search
+                        && let Err(e) = search.sync(db).await
+                    {
+                        tracing::warn!(error = %e, "search index update failed; will retry");
+                    }
+                }
+                Ok(false) => {}
+                Err(e) => tracing::warn!(error = %e, "cannot seed the demo model"),
+            }
+        }
+        Ok(JobEnd::Done(Box::new(report)))
+    }
+
+    /// The build error as shown to users: the internal upload name replaced by the
+    /// uploader's file name.
+    fn describe_error(&self, job: &Job, e: &BuildError) -> String {
+        let msg = e.to_string();
+        match (job.kind, job.source_path.as_deref()) {
+            (JobKind::Upload, Some(p)) => match Path::new(p).file_name().and_then(|n| n.to_str()) {
+                Some(internal) if !job.source_name.is_empty() => {
+                    msg.replace(internal, &job.source_name)
+                }
+                _ => msg,
+            },
+            _ => msg,
+        }
+    }
+
+    /// Renders, stores and returns the thumbnail attachment of a built model (errors are
+    /// logged: a model without a thumbnail is still ready).
+    async fn thumbnail(&self, model_id: i64, lod_path: &Path, user_id: i64) -> Option<i64> {
+        let settings = self.inner.settings.clone();
+        let path = lod_path.to_path_buf();
+        let stored = tokio::task::spawn_blocking(move || -> Result<(String, usize), String> {
+            let lod = LodFile::open(&path).map_err(|e| e.to_string())?;
+            let png = thumbnail::render_png(Arc::new(lod)).map_err(|e| e.to_string())?;
+            let sha = crate::blobs::write_bytes(&settings, &png).map_err(|e| e.to_string())?;
+            Ok((sha, png.len()))
+        })
+        .await;
+        let (sha256, size) = match stored {
+            Ok(Ok(s)) => s,
+            Ok(Err(e)) => {
+                tracing::warn!(model = model_id, error = %e, "no thumbnail");
+                return None;
+            }
+            Err(e) => {
+                tracing::warn!(model = model_id, error = %e, "thumbnail renderer crashed");
+                return None;
+            }
+        };
+        let new = NewAttachment {
+            sha256,
+            media_type: "image/png".into(),
+            size: size as i64,
+            original_name: format!("model-{model_id}-thumbnail.png"),
+        };
+        match attachments::create(&self.inner.db, &new, None, user_id).await {
+            Ok(a) => Some(a.id),
+            Err(e) => {
+                tracing::warn!(model = model_id, error = %e, "cannot record the thumbnail");
+                None
+            }
+        }
+    }
+
+    /// Removes what crashed builds and uploads left behind: engine scratch directories and
+    /// temporary files of dead processes in `models/`, LOD files of deleted models, stale
+    /// temporary files and unclaimed inputs in `uploads/`.
+    pub async fn cleanup_leftovers(&self) -> Result<(), JobError> {
+        let settings = self.inner.settings.clone();
+        let lods = jobs::model_lod_paths(&self.inner.db).await?;
+        let sources = jobs::pending_sources(&self.inner.db).await?;
+        let removed = tokio::task::spawn_blocking(move || {
+            cleanup_dirs(&settings, &lods, &sources)
+        })
+        .await
+        .map_err(|e| JobError::Invalid(e.to_string()))??;
+        for p in removed {
+            tracing::info!(path = %p.display(), "removed leftover of an interrupted build");
+        }
+        Ok(())
+    }
+}
+
+/// The pid at the end of a leftover's name (`.x.mwlod.build-<pid>`, `x.mwlod.tmp-<pid>`).
+fn leftover_pid(name: &str) -> Option<i64> {
+    let (_, pid) = name
+        .rsplit_once(".build-")
+        .or_else(|| name.rsplit_once(".tmp-"))?;
+    pid.parse().ok()
+}
+
+fn cleanup_dirs(
+    settings: &Settings,
+    lods: &[(i64, Option<String>)],
+    sources: &[String],
+) -> std::io::Result<Vec<PathBuf>> {
+    let mut removed = Vec::new();
+    let model_ids: std::collections::HashSet<i64> = lods.iter().map(|(id, _)| *id).collect();
+    if let Ok(dir) = std::fs::read_dir(settings.models_dir()) {
+        for entry in dir.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let path = entry.path();
+            let leftover = match leftover_pid(&name) {
+                Some(pid) => !process_alive(pid),
+                None => name
+                    .strip_suffix(".mwlod")
+                    .and_then(|id| id.parse::<i64>().ok())
+                    .is_some_and(|id| !model_ids.contains(&id)),
+            };
+            if !leftover {
+                continue;
+            }
+            let r = if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                std::fs::remove_dir_all(&path)
+            } else {
+                std::fs::remove_file(&path)
+            };
+            match r {
+                Ok(()) => removed.push(path),
+                Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove"),
+            }
+        }
+    }
+    let keep: std::collections::HashSet<&str> = sources
+        .iter()
+        .filter_map(|s| s.strip_prefix("uploads/"))
+        .collect();
+    if let Ok(dir) = std::fs::read_dir(settings.uploads_dir()) {
+        for entry in dir.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let path = entry.path();
+            let stale_tmp = name.ends_with(".tmp")
+                && entry
+                    .metadata()
+                    .and_then(|m| m.modified())
+                    .ok()
+                    .and_then(|t| t.elapsed().ok())
+                    .is_some_and(|age| age > STALE_TMP);
+            let orphan = name.starts_with("src-") && !keep.contains(name.as_str());
+            if (stale_tmp || orphan) && entry.file_type().is_ok_and(|t| t.is_file()) {
+                match std::fs::remove_file(&path) {
+                    Ok(()) => removed.push(path),
+                    Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove"),
+                }
+            }
+        }
+    }
+    Ok(removed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse() {
+        assert_eq!(parse_size("1G"), Ok(1 << 30));
+        assert_eq!(parse_size("512M"), Ok(512 << 20));
+        assert_eq!(parse_size("1.5GiB"), Ok(3 << 29));
+        assert_eq!(parse_size("4096"), Ok(4096));
+        assert!(parse_size("").is_err());
+        assert!(parse_size("1X").is_err());
+        assert!(parse_size("-1G").is_err());
+    }
+
+    #[test]
+    fn only_the_extension_of_an_upload_name_counts() {
+        assert_eq!(scan_extension("scan.PLY").as_deref(), Some("ply"));
+        assert_eq!(scan_extension("../../etc/x.obj").as_deref(), Some("obj"));
+        assert_eq!(scan_extension("a\\b\\c.glb").as_deref(), Some("glb"));
+        assert_eq!(scan_extension("notes.txt"), None);
+        assert_eq!(scan_extension("noext"), None);
+    }
+
+    #[test]
+    fn leftover_names() {
+        assert_eq!(leftover_pid(".3.mwlod.build-1234"), Some(1234));
+        assert_eq!(leftover_pid("3.mwlod.tmp-77"), Some(77));
+        assert_eq!(leftover_pid("3.mwlod"), None);
+    }
+}

@@ -1,0 +1,113 @@
+//! Assignments (contents attached to parts): `/api/v1/parts/{id}/contents` and the reverse
+//! `/api/v1/contents/{id}/parts`.
+
+use actix_web::{HttpResponse, web};
+use serde::Deserialize;
+
+use super::auth::Auth;
+use super::events::{Event, EventKind};
+use super::{ApiError, AppState};
+use crate::store::assignments;
+use crate::store::contents;
+use crate::store::users::Role;
+
+/// Mounts the routes.
+pub fn configure(cfg: &mut web::ServiceConfig) {
+    cfg.service(
+        super::resource("/api/v1/parts/{id}/contents")
+            .route(web::get().to(list))
+            .route(web::post().to(assign))
+            .route(web::put().to(reorder)),
+    )
+    .service(
+        super::resource("/api/v1/parts/{id}/contents/{content_id}")
+            .route(web::delete().to(unassign)),
+    )
+    .service(super::resource("/api/v1/contents/{id}/parts").route(web::get().to(parts_of)));
+}
+
+/// Body of `POST /api/v1/parts/{id}/contents`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AssignRequest {
+    /// Content to assign.
+    pub content_id: i64,
+    /// 1-based position (default: last).
+    #[serde(default)]
+    pub position: Option<i64>,
+}
+
+/// Body of `PUT /api/v1/parts/{id}/contents`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReorderRequest {
+    /// Every assigned content id, in the new order.
+    pub content_ids: Vec<i64>,
+}
+
+async fn list(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    part: web::Path<i64>,
+) -> Result<HttpResponse, ApiError> {
+    Ok(HttpResponse::Ok().json(assignments::contents_for_part(&state.db, *part).await?))
+}
+
+async fn assign(
+    state: web::Data<AppState>,
+    auth: Auth,
+    part: web::Path<i64>,
+    body: web::Json<AssignRequest>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Editor)?;
+    assignments::assign(&state.db, *part, body.content_id, body.position, auth.id()).await?;
+    state.sync_search().await;
+    publish_part_contents(&state, *part).await;
+    Ok(HttpResponse::Created().json(assignments::contents_for_part(&state.db, *part).await?))
+}
+
+async fn reorder(
+    state: web::Data<AppState>,
+    auth: Auth,
+    part: web::Path<i64>,
+    body: web::Json<ReorderRequest>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Editor)?;
+    assignments::reorder(&state.db, *part, &body.content_ids, auth.id()).await?;
+    publish_part_contents(&state, *part).await;
+    Ok(HttpResponse::Ok().json(assignments::contents_for_part(&state.db, *part).await?))
+}
+
+async fn unassign(
+    state: web::Data<AppState>,
+    auth: Auth,
+    path: web::Path<(i64, i64)>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Editor)?;
+    let (part, content) = path.into_inner();
+    assignments::unassign(&state.db, part, content, auth.id()).await?;
+    state.sync_search().await;
+    publish_part_contents(&state, part).await;
+    Ok(HttpResponse::NoContent().finish())
+}
+
+async fn parts_of(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    id: web::Path<i64>,
+) -> Result<HttpResponse, ApiError> {
+    contents::get(&state.db, *id).await?;
+    Ok(HttpResponse::Ok().json(assignments::parts_for_content(&state.db, *id).await?))
+}
+
+/// Tells live viewers that the contents of part `part_id` changed (after the commit).
+pub async fn publish_part_contents(state: &AppState, part_id: i64) {
+    match crate::store::parts::get(&state.db, part_id).await {
+        Ok(part) => {
+            state
+                .events
+                .publish(Event::part(EventKind::PartContents, part.model_id, part.id))
+        }
+        Err(e) => tracing::warn!(part_id, error = %e, "cannot publish assignment change"),
+    }
+}

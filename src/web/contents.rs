@@ -1,0 +1,354 @@
+//! `/api/v1/contents`: wiki pages with revisions. Every save names its `base_revision`; a
+//! stale base answers 409 with both versions. Anyone logged in reads; editors create, save
+//! and revert; admins delete.
+
+use actix_web::{HttpResponse, web};
+use serde::{Deserialize, Serialize};
+
+use super::auth::Auth;
+use super::events::{Event, EventKind};
+use super::{ApiError, AppState, PageQuery};
+use crate::store::attachments::{self, Attachment};
+use crate::store::contents::{self, Content, ContentEdit, Revision};
+use crate::store::models::double_option;
+use crate::store::users::Role;
+use crate::wiki::{diff, markdown};
+
+/// Mounts the routes.
+pub fn configure(cfg: &mut web::ServiceConfig) {
+    cfg.service(
+        super::resource("/api/v1/contents")
+            .route(web::get().to(list))
+            .route(web::post().to(create)),
+    )
+    .service(super::resource("/api/v1/preview").route(web::post().to(preview)))
+    .service(
+        super::resource("/api/v1/contents/{id}")
+            .route(web::get().to(get))
+            .route(web::put().to(save))
+            .route(web::delete().to(delete)),
+    )
+    .service(super::resource("/api/v1/contents/{id}/revisions").route(web::get().to(revisions)))
+    .service(
+        super::resource("/api/v1/contents/{id}/revisions/{number}").route(web::get().to(revision)),
+    )
+    .service(super::resource("/api/v1/contents/{id}/diff").route(web::get().to(diff_revisions)))
+    .service(super::resource("/api/v1/contents/{id}/revert").route(web::post().to(revert)));
+}
+
+/// A content with its rendered body.
+#[derive(Debug, Serialize)]
+pub struct ContentView {
+    /// The content.
+    #[serde(flatten)]
+    pub content: Content,
+    /// Sanitised HTML of the body.
+    pub html: String,
+    /// Attachments, in order (absent in lists).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub attachments: Option<Vec<Attachment>>,
+}
+
+impl ContentView {
+    fn new(content: Content, attachments: Option<Vec<Attachment>>) -> ContentView {
+        ContentView {
+            html: markdown::render(&content.body),
+            content,
+            attachments,
+        }
+    }
+}
+
+/// Body of `POST /api/v1/contents`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewContent {
+    /// Title.
+    pub title: String,
+    /// Caption.
+    #[serde(default)]
+    pub caption: String,
+    /// Markdown body.
+    #[serde(default)]
+    pub body: String,
+    /// Comment of revision 1.
+    #[serde(default)]
+    pub comment: String,
+    /// Thumbnail attachment.
+    #[serde(default)]
+    pub thumbnail_attachment_id: Option<i64>,
+}
+
+/// Body of `PUT /api/v1/contents/{id}`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SaveContent {
+    /// The revision this edit is based on.
+    pub base_revision: i64,
+    /// Title.
+    pub title: String,
+    /// Caption.
+    #[serde(default)]
+    pub caption: String,
+    /// Markdown body.
+    #[serde(default)]
+    pub body: String,
+    /// Edit comment.
+    #[serde(default)]
+    pub comment: String,
+    /// New thumbnail (`null` clears; absent leaves it).
+    #[serde(default, with = "double_option")]
+    pub thumbnail_attachment_id: Option<Option<i64>>,
+}
+
+fn validate(state: &AppState, edit: &ContentEdit) -> Result<(), ApiError> {
+    let l = &state.settings.limits;
+    Ok(edit.validate(l.title_chars, l.body_bytes)?)
+}
+
+async fn list(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    q: web::Query<PageQuery>,
+) -> Result<HttpResponse, ApiError> {
+    let items: Vec<ContentView> = contents::list(&state.db, q.page())
+        .await?
+        .into_iter()
+        .map(|c| ContentView::new(c, None))
+        .collect();
+    Ok(HttpResponse::Ok().json(items))
+}
+
+async fn create(
+    state: web::Data<AppState>,
+    auth: Auth,
+    body: web::Json<NewContent>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Editor)?;
+    let body = body.into_inner();
+    let edit = ContentEdit {
+        title: body.title,
+        caption: body.caption,
+        body: body.body,
+        comment: body.comment,
+    };
+    validate(&state, &edit)?;
+    let content =
+        contents::create(&state.db, &edit, body.thumbnail_attachment_id, auth.id()).await?;
+    state.sync_search().await;
+    Ok(HttpResponse::Created().json(ContentView::new(content, Some(Vec::new()))))
+}
+
+async fn get(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    id: web::Path<i64>,
+) -> Result<HttpResponse, ApiError> {
+    let content = contents::get(&state.db, *id).await?;
+    let att = attachments::list_for_content(&state.db, *id).await?;
+    Ok(HttpResponse::Ok().json(ContentView::new(content, Some(att))))
+}
+
+async fn save(
+    state: web::Data<AppState>,
+    auth: Auth,
+    id: web::Path<i64>,
+    body: web::Json<SaveContent>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Editor)?;
+    let body = body.into_inner();
+    let edit = ContentEdit {
+        title: body.title,
+        caption: body.caption,
+        body: body.body,
+        comment: body.comment,
+    };
+    validate(&state, &edit)?;
+    let content = contents::update(
+        &state.db,
+        *id,
+        body.base_revision,
+        &edit,
+        body.thumbnail_attachment_id,
+        auth.id(),
+    )
+    .await
+    .map_err(|e| ApiError::from(e).with_yours(&edit))?;
+    state.sync_search().await;
+    state
+        .events
+        .publish(Event::content(EventKind::ContentUpdated, *id));
+    let att = attachments::list_for_content(&state.db, *id).await?;
+    Ok(HttpResponse::Ok().json(ContentView::new(content, Some(att))))
+}
+
+async fn delete(
+    state: web::Data<AppState>,
+    auth: Auth,
+    id: web::Path<i64>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Admin)?;
+    contents::delete(&state.db, *id, auth.id()).await?;
+    state.sync_search().await;
+    state
+        .events
+        .publish(Event::content(EventKind::ContentDeleted, *id));
+    Ok(HttpResponse::NoContent().finish())
+}
+
+async fn revisions(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    id: web::Path<i64>,
+) -> Result<HttpResponse, ApiError> {
+    Ok(HttpResponse::Ok().json(contents::revisions(&state.db, *id).await?))
+}
+
+/// A revision with its rendered body.
+#[derive(Debug, Serialize)]
+struct RevisionView {
+    #[serde(flatten)]
+    revision: Revision,
+    html: String,
+}
+
+async fn revision(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    path: web::Path<(i64, i64)>,
+) -> Result<HttpResponse, ApiError> {
+    let (id, number) = path.into_inner();
+    let revision = contents::revision(&state.db, id, number).await?;
+    Ok(HttpResponse::Ok().json(RevisionView {
+        html: markdown::render(&revision.body),
+        revision,
+    }))
+}
+
+/// `from` / `to` revision numbers of a diff.
+#[derive(Debug, Deserialize)]
+pub struct DiffQuery {
+    /// Older revision (default: the one before `to`).
+    pub from: Option<i64>,
+    /// Newer revision (default: current).
+    pub to: Option<i64>,
+}
+
+/// Diff of one field.
+#[derive(Debug, Serialize)]
+pub struct FieldDiff {
+    /// Value at `from`.
+    pub from: String,
+    /// Value at `to`.
+    pub to: String,
+    /// Whether it changed.
+    pub changed: bool,
+}
+
+/// Diff between two revisions.
+#[derive(Debug, Serialize)]
+pub struct RevisionDiff {
+    /// Content id.
+    pub content_id: i64,
+    /// Older revision number.
+    pub from: i64,
+    /// Newer revision number.
+    pub to: i64,
+    /// Title change.
+    pub title: FieldDiff,
+    /// Caption change.
+    pub caption: FieldDiff,
+    /// Body diff (HTML table, unified text, counts).
+    pub body: diff::Diff,
+}
+
+/// Diffs two revisions of a content (defaults: previous → current).
+pub async fn diff_of(state: &AppState, id: i64, q: &DiffQuery) -> Result<RevisionDiff, ApiError> {
+    let content = contents::get(&state.db, id).await?;
+    let to = q.to.unwrap_or(content.current_revision);
+    let from = q.from.unwrap_or((to - 1).max(1));
+    let a = contents::revision(&state.db, id, from).await?;
+    let b = contents::revision(&state.db, id, to).await?;
+    let body = diff::diff(&a.body, &b.body, 3);
+    Ok(RevisionDiff {
+        content_id: id,
+        from,
+        to,
+        title: FieldDiff {
+            changed: a.title != b.title,
+            from: a.title,
+            to: b.title,
+        },
+        caption: FieldDiff {
+            changed: a.caption != b.caption,
+            from: a.caption,
+            to: b.caption,
+        },
+        body,
+    })
+}
+
+async fn diff_revisions(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    id: web::Path<i64>,
+    q: web::Query<DiffQuery>,
+) -> Result<HttpResponse, ApiError> {
+    Ok(HttpResponse::Ok().json(diff_of(&state, *id, &q).await?))
+}
+
+/// Body of `POST /api/v1/contents/{id}/revert`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RevertRequest {
+    /// Revision to restore.
+    pub revision: i64,
+    /// If given, the save fails with 409 unless this is the current revision.
+    #[serde(default)]
+    pub base_revision: Option<i64>,
+    /// Edit comment (default "Reverted to revision N").
+    #[serde(default)]
+    pub comment: Option<String>,
+}
+
+async fn revert(
+    state: web::Data<AppState>,
+    auth: Auth,
+    id: web::Path<i64>,
+    body: web::Json<RevertRequest>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Editor)?;
+    let content = contents::revert(
+        &state.db,
+        *id,
+        body.revision,
+        body.base_revision,
+        body.comment.as_deref(),
+        auth.id(),
+    )
+    .await?;
+    state.sync_search().await;
+    state
+        .events
+        .publish(Event::content(EventKind::ContentUpdated, *id));
+    let att = attachments::list_for_content(&state.db, *id).await?;
+    Ok(HttpResponse::Ok().json(ContentView::new(content, Some(att))))
+}
+
+/// Body of `POST /api/v1/preview`.
+#[derive(Debug, Deserialize)]
+pub struct PreviewRequest {
+    /// Markdown to render.
+    pub body: String,
+}
+
+async fn preview(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    body: web::Json<PreviewRequest>,
+) -> Result<HttpResponse, ApiError> {
+    if body.body.len() > state.settings.limits.body_bytes {
+        return Err(ApiError::PayloadTooLarge("body too large".into()));
+    }
+    Ok(HttpResponse::Ok().json(serde_json::json!({ "html": markdown::render(&body.body) })))
+}

@@ -1,0 +1,396 @@
+//! Model uploads and build jobs.
+//!
+//! * `POST /api/v1/models/upload?title=&filename=[&description=]` (admin): the raw request
+//!   body is the scan, streamed to `uploads/` (never held in memory), then a model and its
+//!   build job are created (202 with both). The file name only supplies the extension (the
+//!   format); it is shown to users but never used as a path.
+//! * `GET /api/v1/jobs` (admin), `GET /api/v1/jobs/{id}` (anyone logged in),
+//!   `POST /api/v1/jobs/{id}/cancel` (admin).
+//! * `/admin/jobs` (admin): jobs with live progress, a multipart upload form and cancel
+//!   buttons, usable without JavaScript (the page refreshes itself while a job runs).
+
+use std::path::PathBuf;
+
+use actix_multipart::Multipart;
+use actix_web::http::{StatusCode, header};
+use actix_web::{HttpRequest, HttpResponse, web};
+use askama::Template;
+use futures_util::{Stream, StreamExt};
+use serde::Deserialize;
+use serde_json::json;
+use tokio::io::AsyncWriteExt;
+
+use super::auth::{Auth, PageAuth, PageForm};
+use super::pages::{CsrfOnly, Layout, redirect, render_status};
+use super::{ApiError, AppState, PageError, PageQuery};
+use crate::jobs::{JobError, ReceivedScan, SCAN_EXTENSIONS, scan_extension};
+use crate::store::Page;
+use crate::store::jobs::{self, CancelOutcome, Job, JobStatus};
+use crate::store::models::NewModel;
+use crate::store::users::Role;
+
+/// Mounts the routes (before `models`: `/api/v1/models/upload` must win over `/{id}`).
+pub fn configure(cfg: &mut web::ServiceConfig) {
+    cfg.service(super::resource("/api/v1/models/upload").route(web::post().to(upload)))
+        .service(super::resource("/api/v1/jobs").route(web::get().to(list)))
+        .service(super::resource("/api/v1/jobs/{id}").route(web::get().to(get)))
+        .service(super::resource("/api/v1/jobs/{id}/cancel").route(web::post().to(cancel)))
+        .service(super::resource("/admin/jobs").route(web::get().to(page)))
+        .service(super::resource("/admin/jobs/upload").route(web::post().to(page_upload)))
+        .service(super::resource("/admin/jobs/{id}/cancel").route(web::post().to(page_cancel)));
+}
+
+impl From<JobError> for ApiError {
+    fn from(e: JobError) -> ApiError {
+        match e {
+            JobError::Store(s) => s.into(),
+            JobError::Invalid(m) => ApiError::bad(m),
+            JobError::Io(e) => ApiError::internal(format!("I/O: {e}")),
+        }
+    }
+}
+
+/// Removes a partly received upload unless disarmed.
+struct TempUpload(Option<PathBuf>);
+
+impl Drop for TempUpload {
+    fn drop(&mut self) {
+        if let Some(p) = self.0.take() {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+}
+
+fn too_large(limit: u64) -> ApiError {
+    ApiError::PayloadTooLarge(format!(
+        "model upload larger than the limit of {limit} bytes (--max-model-upload-mb)"
+    ))
+}
+
+/// Streams `body` to a temporary file in `uploads/`, at most `limit` bytes.
+async fn receive_scan<S, E>(
+    state: &AppState,
+    mut body: S,
+    extension: String,
+    display_name: String,
+    limit: u64,
+) -> Result<ReceivedScan, ApiError>
+where
+    S: Stream<Item = Result<web::Bytes, E>> + Unpin,
+    E: std::fmt::Display,
+{
+    let path = state
+        .settings
+        .uploads_dir()
+        .join(format!("{}.tmp", crate::random_hex(16)));
+    let mut guard = TempUpload(Some(path.clone()));
+    let file = tokio::fs::File::create(&path).await?;
+    let mut out = tokio::io::BufWriter::with_capacity(1 << 20, file);
+    let mut bytes: u64 = 0;
+    while let Some(chunk) = body.next().await {
+        let chunk = chunk.map_err(|e| ApiError::bad(format!("upload interrupted: {e}")))?;
+        bytes += chunk.len() as u64;
+        if bytes > limit {
+            return Err(too_large(limit));
+        }
+        out.write_all(&chunk).await?;
+    }
+    if bytes == 0 {
+        return Err(ApiError::bad("the upload is empty"));
+    }
+    out.flush().await?;
+    let file = out.into_inner();
+    file.sync_all().await?;
+    drop(file);
+    guard.0 = None;
+    Ok(ReceivedScan {
+        temp_path: path,
+        bytes,
+        extension,
+        display_name,
+    })
+}
+
+fn check_title(title: &str, max: usize) -> Result<String, ApiError> {
+    let t = title.trim();
+    let n = t.chars().count();
+    if n == 0 || n > max {
+        return Err(ApiError::bad(format!("title must be 1 to {max} characters")));
+    }
+    Ok(t.to_string())
+}
+
+fn extension_of(filename: &str) -> Result<String, ApiError> {
+    scan_extension(filename).ok_or_else(|| {
+        ApiError::bad(format!(
+            "cannot tell the format of {:?}: the file name must end in {SCAN_EXTENSIONS}",
+            super::attachments::sanitize_name(filename)
+        ))
+    })
+}
+
+/// Query of the raw upload.
+#[derive(Debug, Deserialize)]
+struct UploadQuery {
+    title: Option<String>,
+    filename: Option<String>,
+    #[serde(default)]
+    description: String,
+}
+
+async fn upload(
+    state: web::Data<AppState>,
+    auth: Auth,
+    req: HttpRequest,
+    q: web::Query<UploadQuery>,
+    payload: web::Payload,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Admin)?;
+    let title = check_title(
+        q.title.as_deref().unwrap_or(""),
+        state.settings.limits.title_chars,
+    )?;
+    let filename = q
+        .filename
+        .as_deref()
+        .ok_or_else(|| ApiError::bad("the filename query parameter is required (e.g. scan.ply)"))?;
+    let extension = extension_of(filename)?;
+    let limit = state.settings.build.upload_bytes;
+    let declared = req
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.trim().parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit) {
+        return Err(too_large(limit));
+    }
+    let display = super::attachments::sanitize_name(filename);
+    let scan = receive_scan(&state, payload, extension, display.clone(), limit).await?;
+    let model = NewModel {
+        title,
+        description: q.description.replace("\r\n", "\n"),
+        source_name: display,
+    };
+    let (model, job) = state.jobs.submit_upload(scan, &model, auth.id()).await?;
+    Ok(HttpResponse::Accepted()
+        .insert_header((header::LOCATION, format!("/api/v1/jobs/{}", job.id)))
+        .json(json!({ "model": model, "job": job })))
+}
+
+/// Query of the job list.
+#[derive(Debug, Deserialize)]
+struct ListQuery {
+    status: Option<String>,
+    limit: Option<i64>,
+    offset: Option<i64>,
+}
+
+fn parse_status(s: &str) -> Result<JobStatus, ApiError> {
+    serde_json::from_value(json!(s.trim())).map_err(|_| {
+        ApiError::bad(format!(
+            "unknown job status {s:?}: use queued, running, done, failed or cancelled"
+        ))
+    })
+}
+
+async fn list(
+    state: web::Data<AppState>,
+    auth: Auth,
+    q: web::Query<ListQuery>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Admin)?;
+    let status = q.status.as_deref().map(parse_status).transpose()?;
+    let page = PageQuery {
+        limit: q.limit,
+        offset: q.offset,
+    }
+    .page();
+    Ok(HttpResponse::Ok().json(jobs::list(&state.db, status, page).await?))
+}
+
+async fn get(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    id: web::Path<i64>,
+) -> Result<HttpResponse, ApiError> {
+    Ok(HttpResponse::Ok().json(jobs::get(&state.db, *id).await?))
+}
+
+async fn cancel(
+    state: web::Data<AppState>,
+    auth: Auth,
+    id: web::Path<i64>,
+) -> Result<HttpResponse, ApiError> {
+    auth.require(Role::Admin)?;
+    match state.jobs.cancel(*id, Some(auth.id())).await? {
+        CancelOutcome::Cancelled(job) => Ok(HttpResponse::Ok().json(job)),
+        CancelOutcome::Requested(job) => Ok(HttpResponse::Accepted().json(job)),
+        CancelOutcome::Finished(job) => Err(ApiError::Conflict(format!(
+            "job {} has already ended ({})",
+            job.id,
+            job.status.as_str()
+        ))),
+    }
+}
+
+// ---- admin page ------------------------------------------------------------------------------
+
+/// A job as the page shows it.
+pub struct JobView {
+    /// The job.
+    pub job: Job,
+    /// Whether it can still be cancelled.
+    pub active: bool,
+    /// `12.5` → `"12.5"`.
+    pub percent: String,
+}
+
+impl JobView {
+    /// View of `job`.
+    pub fn new(job: Job) -> JobView {
+        JobView {
+            active: !job.status.is_finished(),
+            percent: format!("{:.1}", job.percent),
+            job,
+        }
+    }
+}
+
+#[derive(Template)]
+#[template(path = "admin_jobs.html")]
+struct JobsPage {
+    layout: Layout,
+    jobs: Vec<JobView>,
+    any_active: bool,
+    error: String,
+    max_upload_mb: u64,
+    extensions: &'static str,
+}
+
+async fn jobs_page(
+    state: &AppState,
+    auth: &PageAuth,
+    status: StatusCode,
+    error: String,
+) -> Result<HttpResponse, PageError> {
+    let list = jobs::list(&state.db, None, Page::new(Some(200), None)).await?;
+    let jobs: Vec<JobView> = list.into_iter().map(JobView::new).collect();
+    render_status(
+        status,
+        &JobsPage {
+            layout: Layout::new(auth, "Jobs"),
+            any_active: jobs.iter().any(|j| j.active),
+            jobs,
+            error,
+            max_upload_mb: state.settings.build.upload_bytes >> 20,
+            extensions: SCAN_EXTENSIONS,
+        },
+    )
+}
+
+async fn page(state: web::Data<AppState>, auth: PageAuth) -> Result<HttpResponse, PageError> {
+    auth.require(Role::Admin)?;
+    jobs_page(&state, &auth, StatusCode::OK, String::new()).await
+}
+
+fn multipart_error(e: actix_multipart::MultipartError) -> ApiError {
+    ApiError::bad(format!("invalid multipart upload: {e}"))
+}
+
+/// Reads the upload form: text fields (`csrf_token` first, `title`, `description`) and one
+/// `file`, streamed to `uploads/`.
+async fn receive_form(
+    state: &AppState,
+    auth: &PageAuth,
+    mut form: Multipart,
+) -> Result<(ReceivedScan, String, String), ApiError> {
+    let limit = state.settings.build.upload_bytes;
+    let mut fields = std::collections::HashMap::new();
+    let mut scan = None;
+    while let Some(field) = form.next().await {
+        let mut field = field.map_err(multipart_error)?;
+        let name = field.name().unwrap_or("").to_string();
+        let filename = field
+            .content_disposition()
+            .and_then(|cd| cd.get_filename())
+            .map(str::to_string);
+        if name == "file" {
+            if scan.is_some() {
+                return Err(ApiError::bad("upload exactly one file"));
+            }
+            let sent = fields.get("csrf_token").map(String::as_str).unwrap_or("");
+            if !super::auth::constant_time_eq(sent, auth.csrf()) {
+                return Err(ApiError::Forbidden(
+                    "missing or invalid CSRF token: reload the page and try again".into(),
+                ));
+            }
+            let filename = filename.unwrap_or_default();
+            let extension = extension_of(&filename)?;
+            let display = super::attachments::sanitize_name(&filename);
+            let stream = (&mut field).map(|c| c.map_err(multipart_error));
+            scan = Some(receive_scan(state, Box::pin(stream), extension, display, limit).await?);
+        } else {
+            let mut value = Vec::new();
+            while let Some(chunk) = field.next().await {
+                value.extend_from_slice(&chunk.map_err(multipart_error)?);
+                if value.len() > 64 * 1024 {
+                    return Err(ApiError::bad(format!("form field {name:?} too long")));
+                }
+            }
+            fields.insert(name, String::from_utf8_lossy(&value).into_owned());
+        }
+    }
+    let scan = scan.ok_or_else(|| ApiError::bad("choose a scan file to upload"))?;
+    let title = fields.remove("title").unwrap_or_default();
+    let description = fields.remove("description").unwrap_or_default();
+    Ok((scan, title, description))
+}
+
+async fn page_upload(
+    state: web::Data<AppState>,
+    auth: PageAuth,
+    req: HttpRequest,
+    form: Multipart,
+) -> Result<HttpResponse, PageError> {
+    auth.require(Role::Admin)?;
+    super::auth::check_origin(&req)?;
+    let (scan, title, description) = match receive_form(&state, &auth, form).await {
+        Ok(r) => r,
+        Err(e @ ApiError::Forbidden(_)) => return Err(e.into()),
+        Err(e) => return jobs_page(&state, &auth, e.status_code(), e.message()).await,
+    };
+    let title = match check_title(&title, state.settings.limits.title_chars) {
+        Ok(t) => t,
+        Err(e) => {
+            let _ = tokio::fs::remove_file(&scan.temp_path).await;
+            return jobs_page(&state, &auth, StatusCode::BAD_REQUEST, e.message()).await;
+        }
+    };
+    let model = NewModel {
+        title,
+        description: description.replace("\r\n", "\n"),
+        source_name: scan.display_name.clone(),
+    };
+    let (model, _job) = state
+        .jobs
+        .submit_upload(scan, &model, auth.id())
+        .await
+        .map_err(ApiError::from)?;
+    Ok(redirect(&format!("/models/{}", model.id)))
+}
+
+use actix_web::ResponseError as _;
+
+async fn page_cancel(
+    state: web::Data<AppState>,
+    id: web::Path<i64>,
+    post: PageForm<CsrfOnly>,
+) -> Result<HttpResponse, PageError> {
+    post.auth.require(Role::Admin)?;
+    state
+        .jobs
+        .cancel(*id, Some(post.auth.id()))
+        .await
+        .map_err(ApiError::from)?;
+    Ok(redirect("/admin/jobs"))
+}

@@ -1,0 +1,131 @@
+//! `GET /api/v1/search?q=&model=&limit=&offset=`: ranked contents with highlighted
+//! snippets; the total number of matches is in the `X-Total-Count` header.
+
+use actix_web::{HttpResponse, web};
+use serde::Deserialize;
+
+use super::auth::Auth;
+use super::{ApiError, AppState};
+use crate::search::{SearchHit, SearchResults};
+use crate::store::assignments;
+
+/// Mounts the route.
+pub fn configure(cfg: &mut web::ServiceConfig) {
+    cfg.service(super::resource("/api/v1/search").route(web::get().to(search)));
+}
+
+/// Search parameters.
+#[derive(Debug, Default, Deserialize)]
+pub struct SearchQuery {
+    /// Query text (words are ANDed; tantivy syntax such as `"phrase"` and `-word` works).
+    #[serde(default)]
+    pub q: String,
+    /// Only contents assigned to this model (empty: all).
+    #[serde(default, deserialize_with = "empty_as_none")]
+    pub model: Option<i64>,
+    /// Hits per page (1–100, default 20).
+    pub limit: Option<usize>,
+    /// Hits to skip.
+    pub offset: Option<usize>,
+}
+
+/// Runs a search on a blocking thread.
+pub async fn run(state: &AppState, q: &SearchQuery) -> Result<SearchResults, ApiError> {
+    if q.q.len() > 1000 {
+        return Err(ApiError::bad("query longer than 1000 bytes"));
+    }
+    let search = state.search.clone();
+    let text = q.q.clone();
+    let (model, limit, offset) = (
+        q.model,
+        q.limit.unwrap_or(20).clamp(1, 100),
+        q.offset.unwrap_or(0).min(10_000),
+    );
+    Ok(
+        tokio::task::spawn_blocking(move || search.search(&text, model, limit, offset))
+            .await
+            .map_err(ApiError::internal)??,
+    )
+}
+
+async fn search(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    q: web::Query<SearchQuery>,
+) -> Result<HttpResponse, ApiError> {
+    let results = run(&state, &q).await?;
+    let hits = with_part_links(&state, results.hits).await?;
+    Ok(HttpResponse::Ok()
+        .insert_header(("X-Total-Count", results.total.to_string()))
+        .json(hits))
+}
+
+/// A part a hit is assigned to, with the link that opens the viewer on the part's best view
+/// (framed, highlighted, its information open).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PartLink {
+    /// Part id.
+    pub id: i64,
+    /// Model id.
+    pub model_id: i64,
+    /// Model title.
+    pub model_title: String,
+    /// Part kind.
+    pub kind: String,
+    /// `/models/{model_id}?part={id}`.
+    pub url: String,
+}
+
+/// A search hit with the parts it is assigned to.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct HitView {
+    /// The hit.
+    #[serde(flatten)]
+    pub hit: SearchHit,
+    /// Parts showing it, each linking to its best view.
+    pub parts: Vec<PartLink>,
+}
+
+/// The best-view links of the parts content `content_id` is assigned to.
+pub async fn part_links(state: &AppState, content_id: i64) -> Result<Vec<PartLink>, ApiError> {
+    Ok(assignments::parts_for_content(&state.db, content_id)
+        .await?
+        .into_iter()
+        .map(|p| PartLink {
+            url: format!("/models/{}?part={}", p.model_id, p.id),
+            id: p.id,
+            model_id: p.model_id,
+            model_title: p.model_title,
+            kind: p.kind,
+        })
+        .collect())
+}
+
+/// Adds the part links to each hit.
+pub async fn with_part_links(
+    state: &AppState,
+    hits: Vec<SearchHit>,
+) -> Result<Vec<HitView>, ApiError> {
+    let mut out = Vec::with_capacity(hits.len());
+    for hit in hits {
+        let parts = part_links(state, hit.id).await?;
+        out.push(HitView { hit, parts });
+    }
+    Ok(out)
+}
+
+/// Deserialises an optional number where an empty string (an HTML form's "any" choice)
+/// means none.
+pub fn empty_as_none<'de, D>(d: D) -> Result<Option<i64>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    let s: Option<String> = Option::deserialize(d)?;
+    match s.as_deref().map(str::trim) {
+        None | Some("") => Ok(None),
+        Some(v) => v
+            .parse()
+            .map(Some)
+            .map_err(|_| serde::de::Error::custom(format!("invalid number {v:?}"))),
+    }
+}

@@ -1,0 +1,324 @@
+// Patch blob decoder: docs/FORMAT.md "Patch blob", the browser twin of
+// engine/src/lod/codec.rs (the reference). Pure: the meshoptimizer decoder and a zstd
+// decompressor are passed in, so the same module runs in the viewer's worker and in Node tests.
+//
+// Arithmetic: positions, ids and their residuals exceed 2^31, so everything is done on
+// doubles holding exact integers (|v| < 2^53); no 32-bit bitwise operator touches them.
+
+const MAGIC = [0x4d, 0x57, 0x50, 0x32]; // "MWP2"
+const COMPRESSION_NONE = 0;
+const COMPRESSION_ZSTD = 1;
+const FLAG_COLORS = 1;
+const FLAG_NORMALS = 2;
+const PAYLOAD_HEADER = 52;
+const MAX_ELEMENTS = 1 << 20;
+const MAX_SHIFT = 24;
+const MAX_PAYLOAD = 64 << 20;
+const U32_MAX = 4294967295;
+
+/** A blob that does not decode. */
+export class DecodeError extends Error {
+  constructor(message) {
+    super(message);
+    this.name = 'DecodeError';
+  }
+}
+
+function u32(bytes, at) {
+  if (at + 4 > bytes.length) throw new DecodeError('blob truncated');
+  return (bytes[at] | (bytes[at + 1] << 8) | (bytes[at + 2] << 16)) + bytes[at + 3] * 16777216;
+}
+
+/** Reads a zigzag LEB128 varint as an exact integer. `cursor.at` advances. */
+export function readVarint(bytes, cursor) {
+  let z = 0;
+  let scale = 1;
+  for (let i = 0; i < 10; i++) {
+    if (cursor.at >= bytes.length) throw new DecodeError('varint stream truncated');
+    const byte = bytes[cursor.at++];
+    z += (byte & 0x7f) * scale;
+    if ((byte & 0x80) === 0) {
+      if (z > Number.MAX_SAFE_INTEGER) throw new DecodeError('varint out of range');
+      return z % 2 === 1 ? -(z + 1) / 2 : z / 2;
+    }
+    scale *= 128;
+  }
+  throw new DecodeError('varint too long');
+}
+
+/** Vertices on an edge used by exactly one triangle. */
+export function borderVertices(indices, vertexCount) {
+  const count = new Map();
+  for (let i = 0; i + 2 < indices.length; i += 3) {
+    for (let k = 0; k < 3; k++) {
+      const a = indices[i + k];
+      const b = indices[i + ((k + 1) % 3)];
+      const key = a < b ? a * vertexCount + b : b * vertexCount + a;
+      count.set(key, (count.get(key) || 0) + 1);
+    }
+  }
+  const border = new Uint8Array(vertexCount);
+  for (const [key, c] of count) {
+    if (c !== 1) continue;
+    const a = Math.floor(key / vertexCount);
+    const b = key - a * vertexCount;
+    border[a] = 1;
+    border[b] = 1;
+  }
+  return border;
+}
+
+const floorShift = (v, s) => Math.floor(v / 2 ** s);
+
+/**
+ * Walks the triangles in order and calls `visit(v, kind, a, b, c)` for each vertex the first
+ * time a triangle uses it: kind 0 = parallelogram a + b - c, 1 = midpoint of a and b,
+ * 2 = copy of a, 3 = zero (the very first vertex). Mirrors `Predictor::walk`.
+ */
+function walk(indices, n, visit) {
+  const known = new Uint8Array(n);
+  const opposite = new Map();
+  let last = -1;
+  let visited = 0;
+  for (let i = 0; i + 2 < indices.length; i += 3) {
+    for (let k = 0; k < 3; k++) {
+      const v = indices[i + k];
+      if (known[v]) continue;
+      const a = indices[i + ((k + 1) % 3)];
+      const b = indices[i + ((k + 2) % 3)];
+      const ka = known[a];
+      const kb = known[b];
+      if (ka && kb) {
+        const c = opposite.get(a < b ? a * n + b : b * n + a);
+        if (c !== undefined) visit(v, 0, a, b, c);
+        else visit(v, 1, a, b, 0);
+      } else if (ka) {
+        visit(v, 2, a, 0, 0);
+      } else if (kb) {
+        visit(v, 2, b, 0, 0);
+      } else if (last >= 0) {
+        visit(v, 2, last, 0, 0);
+      } else {
+        visit(v, 3, 0, 0, 0);
+      }
+      known[v] = 1;
+      last = v;
+      visited++;
+    }
+    for (let k = 0; k < 3; k++) {
+      const a = indices[i + k];
+      const b = indices[i + ((k + 1) % 3)];
+      const key = a < b ? a * n + b : b * n + a;
+      if (!opposite.has(key)) opposite.set(key, indices[i + ((k + 2) % 3)]);
+    }
+  }
+  return visited;
+}
+
+function predict(values, stride, k, kind, a, b, c) {
+  switch (kind) {
+    case 0:
+      return values[a * stride + k] + values[b * stride + k] - values[c * stride + k];
+    case 1:
+      return Math.floor((values[a * stride + k] + values[b * stride + k]) / 2);
+    case 2:
+      return values[a * stride + k];
+    default:
+      return 0;
+  }
+}
+
+const f = Math.fround;
+
+/**
+ * Area-weighted unit vertex normals of a triangle set (+Z for isolated vertices), in f32
+ * arithmetic step by step like the reference, so degenerate fans give the same result.
+ */
+export function computedNormals(positions, indices, vertexCount) {
+  const acc = new Float32Array(vertexCount * 3);
+  for (let i = 0; i + 2 < indices.length; i += 3) {
+    const ia = indices[i] * 3;
+    const ib = indices[i + 1] * 3;
+    const ic = indices[i + 2] * 3;
+    const ux = f(positions[ib] - positions[ia]);
+    const uy = f(positions[ib + 1] - positions[ia + 1]);
+    const uz = f(positions[ib + 2] - positions[ia + 2]);
+    const wx = f(positions[ic] - positions[ia]);
+    const wy = f(positions[ic + 1] - positions[ia + 1]);
+    const wz = f(positions[ic + 2] - positions[ia + 2]);
+    const nx = f(f(uy * wz) - f(uz * wy));
+    const ny = f(f(uz * wx) - f(ux * wz));
+    const nz = f(f(ux * wy) - f(uy * wx));
+    for (const o of [ia, ib, ic]) {
+      acc[o] += nx;
+      acc[o + 1] += ny;
+      acc[o + 2] += nz;
+    }
+  }
+  for (let o = 0; o < acc.length; o += 3) {
+    const len = f(Math.sqrt(f(f(f(acc[o] * acc[o]) + f(acc[o + 1] * acc[o + 1])) + f(acc[o + 2] * acc[o + 2]))));
+    if (len > 0) {
+      acc[o] /= len;
+      acc[o + 1] /= len;
+      acc[o + 2] /= len;
+    } else {
+      acc[o] = 0;
+      acc[o + 1] = 0;
+      acc[o + 2] = 1;
+    }
+  }
+  return acc;
+}
+
+/**
+ * Decodes one patch blob.
+ * @param {Uint8Array} blob
+ * @param {{origin: number[], step: number}} grid the model grid (header)
+ * @param {{meshopt: object, decompress: (data: Uint8Array, out: Uint8Array) => Uint8Array}} deps
+ *   meshoptimizer's `MeshoptDecoder` (ready) and a zstd decompressor (fzstd's `decompress`)
+ * @returns {{vertexCount: number, triangleCount: number, shift: number,
+ *   gridPositions: Uint32Array, positions: Float32Array, ids: Uint32Array,
+ *   indices: Uint32Array, colors: Uint8Array|null, normals: Float32Array|null,
+ *   border: Uint8Array}}
+ */
+export function decodePatch(blob, grid, deps) {
+  if (!(blob instanceof Uint8Array)) throw new DecodeError('blob must be a Uint8Array');
+  if (blob.length < 12) throw new DecodeError('blob truncated');
+  for (let i = 0; i < 4; i++) if (blob[i] !== MAGIC[i]) throw new DecodeError('bad blob magic');
+  const payloadLen = u32(blob, 8);
+  if (payloadLen > MAX_PAYLOAD) throw new DecodeError('patch declares implausible sizes');
+  let payload;
+  if (blob[4] === COMPRESSION_NONE) {
+    payload = blob.subarray(12);
+  } else if (blob[4] === COMPRESSION_ZSTD) {
+    try {
+      payload = deps.decompress(blob.subarray(12), new Uint8Array(payloadLen));
+    } catch (e) {
+      throw new DecodeError(`decompression failed: ${e && e.message}`);
+    }
+  } else {
+    throw new DecodeError(`unknown compression ${blob[4]}`);
+  }
+  if (payload.length !== payloadLen || payload.length < PAYLOAD_HEADER) {
+    throw new DecodeError('blob truncated');
+  }
+  const n = u32(payload, 0);
+  const t = u32(payload, 4);
+  const flags = u32(payload, 8);
+  const shift = u32(payload, 12);
+  if (n > MAX_ELEMENTS || t > MAX_ELEMENTS || shift > MAX_SHIFT) {
+    throw new DecodeError('patch declares implausible sizes');
+  }
+  const min = [u32(payload, 16), u32(payload, 20), u32(payload, 24)];
+  const streams = [];
+  let at = PAYLOAD_HEADER;
+  for (let i = 0; i < 5; i++) {
+    const len = u32(payload, 28 + 4 * i);
+    if (at + len > payload.length) throw new DecodeError('blob truncated');
+    streams.push(payload.subarray(at, at + len));
+    at += len;
+  }
+  const [idxS, posS, idsS, colS, norS] = streams;
+  const { meshopt } = deps;
+
+  const indexBytes = new Uint8Array(t * 3 * 4);
+  if (t > 0) {
+    try {
+      meshopt.decodeIndexBuffer(indexBytes, t * 3, 4, idxS);
+    } catch {
+      throw new DecodeError('stream indices does not decode');
+    }
+  }
+  const indices = new Uint32Array(indexBytes.buffer, 0, t * 3);
+  for (let i = 0; i < indices.length; i++) {
+    if (indices[i] >= n) throw new DecodeError('stream indices does not decode');
+  }
+  const border = borderVertices(indices, n);
+
+  const pos = new Float64Array(n * 3);
+  const ids = new Float64Array(n);
+  const posCursor = { at: 0 };
+  const idsCursor = { at: 0 };
+  const visited = walk(indices, n, (v, kind, a, b, c) => {
+    if (border[v] || shift === 0) {
+      for (let k = 0; k < 3; k++) {
+        pos[v * 3 + k] = predict(pos, 3, k, kind, a, b, c) + readVarint(posS, posCursor);
+      }
+    } else {
+      const scale = 2 ** shift;
+      for (let k = 0; k < 3; k++) {
+        const guess = floorShift(predict(pos, 3, k, kind, a, b, c), shift);
+        pos[v * 3 + k] = (guess + readVarint(posS, posCursor)) * scale;
+      }
+    }
+    ids[v] = predict(ids, 1, 0, kind, a, b, c) + readVarint(idsS, idsCursor);
+  });
+  if (visited !== n) throw new DecodeError('stream positions does not decode');
+
+  const gridPositions = new Uint32Array(n * 3);
+  const positions = new Float32Array(n * 3);
+  for (let v = 0; v < n; v++) {
+    for (let k = 0; k < 3; k++) {
+      const g = pos[v * 3 + k] + min[k];
+      if (!(g >= 0 && g <= U32_MAX)) throw new DecodeError('stream positions does not decode');
+      gridPositions[v * 3 + k] = g;
+      positions[v * 3 + k] = grid.origin[k] + grid.step * g;
+    }
+  }
+  const originalIds = new Uint32Array(n);
+  for (let v = 0; v < n; v++) {
+    if (!(ids[v] >= 0 && ids[v] <= U32_MAX)) throw new DecodeError('stream original ids does not decode');
+    originalIds[v] = ids[v];
+  }
+
+  let colors = null;
+  if (flags & FLAG_COLORS) {
+    colors = new Uint8Array(n * 4);
+    if (n > 0) {
+      try {
+        meshopt.decodeVertexBuffer(colors, n, 4, colS, 'COLOR');
+      } catch {
+        throw new DecodeError('stream colors does not decode');
+      }
+    }
+  }
+  let normals = null;
+  if (flags & FLAG_NORMALS) {
+    normals = computedNormals(positions, indices, n);
+    let borderCount = 0;
+    for (let v = 0; v < n; v++) borderCount += border[v];
+    if (borderCount > 0) {
+      const octBytes = new Uint8Array(borderCount * 8);
+      try {
+        meshopt.decodeVertexBuffer(octBytes, borderCount, 8, norS, 'OCTAHEDRAL');
+      } catch {
+        throw new DecodeError('stream normals does not decode');
+      }
+      const oct = new Int16Array(octBytes.buffer);
+      let s = 0;
+      for (let v = 0; v < n; v++) {
+        if (!border[v]) continue;
+        const x = oct[s * 4];
+        const y = oct[s * 4 + 1];
+        const z = oct[s * 4 + 2];
+        s++;
+        const len = Math.max(f(Math.sqrt(f(f(f(x * x) + f(y * y)) + f(z * z)))), f(1e-12));
+        normals[v * 3] = x / len;
+        normals[v * 3 + 1] = y / len;
+        normals[v * 3 + 2] = z / len;
+      }
+    }
+  }
+  return {
+    vertexCount: n,
+    triangleCount: t,
+    shift,
+    gridPositions,
+    positions,
+    ids: originalIds,
+    indices,
+    colors,
+    normals,
+    border,
+  };
+}

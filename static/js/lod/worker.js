@@ -1,0 +1,40 @@
+// Decoding worker: checks a patch blob's CRC, decodes it (decode.js) and sends back
+// GPU-ready arrays (transferred, not copied). Started as a module worker by workers.js.
+// Import maps do not reach workers, so the vendor modules are imported by URL.
+
+import { MeshoptDecoder } from '/static/vendor/meshoptimizer/meshopt_decoder.mjs';
+import { decompress } from '/static/vendor/fzstd/esm/index.mjs';
+import { decodePatch, computedNormals } from './decode.js';
+import { crc32 } from './table.js';
+
+const ready = MeshoptDecoder.ready.then(() => ({ meshopt: MeshoptDecoder, decompress }));
+
+/** Packs a decoded patch for the GPU: u16 indices when they fit, i8 normals are not worth it. */
+function pack(p) {
+  const indices = p.vertexCount <= 65536 ? Uint16Array.from(p.indices) : p.indices;
+  const normals = p.normals || computedNormals(p.positions, p.indices, p.vertexCount);
+  return {
+    vertexCount: p.vertexCount,
+    triangleCount: p.triangleCount,
+    positions: p.positions,
+    normals,
+    colors: p.colors,
+    ids: p.ids,
+    indices,
+  };
+}
+
+self.onmessage = async (event) => {
+  const { id, blob, grid, crc } = event.data;
+  try {
+    const deps = await ready;
+    const bytes = new Uint8Array(blob);
+    if (crc !== undefined && crc32(bytes) !== crc) throw new Error('patch failed its checksum');
+    const patch = pack(decodePatch(bytes, grid, deps));
+    const transfer = [patch.positions.buffer, patch.normals.buffer, patch.ids.buffer, patch.indices.buffer];
+    if (patch.colors) transfer.push(patch.colors.buffer);
+    self.postMessage({ id, patch }, transfer);
+  } catch (e) {
+    self.postMessage({ id, error: String((e && e.message) || e) });
+  }
+};

@@ -1,0 +1,463 @@
+// The 3D viewer of the model page (progressive enhancement of `<div id="viewer">`): streams
+// the model's patches view-dependently, draws them with three.js, shows the parts as callouts
+// and exact highlights, opens their information, lands on a linked part, follows live edits.
+
+import * as THREE from 'three';
+import { parseBinary, fromJson } from '../lod/table.js';
+import { Streamer } from '../lod/stream.js';
+import { DecoderPool } from '../lod/workers.js';
+import { PartStore } from '../parts/parts.js';
+import { Callouts } from '../parts/callouts.js';
+import { InfoPanel, Preview } from '../parts/panel.js';
+import { listen } from '../parts/live.js';
+import { SceneView } from './scene.js';
+import { Navigation, framing } from './navigation.js';
+import { pick, firstHitDistance } from './picking.js';
+import { makeToolbar } from './toolbar.js';
+import { linkedPart, parseCamera, writePart } from './url.js';
+
+const CALLOUT_INTERVAL_MS = 120;
+const CLICK_SLOP_PX = 5;
+const NEAR_PX = 12;
+
+async function loadTable(modelId) {
+  const base = `/api/v1/models/${modelId}/lod`;
+  const res = await fetch(`${base}?format=binary`, { credentials: 'same-origin' });
+  if (res.ok) return { table: parseBinary(await res.arrayBuffer()), bytes: Number(res.headers.get('Content-Length')) || 0 };
+  const json = await fetch(base, { credentials: 'same-origin' });
+  if (!json.ok) throw new Error(`the model's hierarchy is not available (HTTP ${json.status})`);
+  const text = await json.text();
+  return { table: fromJson(JSON.parse(text)), bytes: text.length };
+}
+
+class Viewer {
+  constructor(root, table, data, tableBytes) {
+    this.root = root;
+    this.table = table;
+    this.modelId = data.model.id;
+    this.started = performance.now();
+    this.firstImageAt = null;
+    this.tableBytes = tableBytes;
+    this.frames = 0;
+    this.hovered = null;
+    this.selected = null;
+    this.foveae = [];
+    this.foveaMode = false;
+    this.lastLayout = 0;
+    this.layoutDirty = true;
+    this.result = null;
+
+    root.replaceChildren();
+    root.classList.add('viewer-live');
+    this.stage = document.createElement('div');
+    this.stage.className = 'viewer-stage';
+    root.appendChild(this.stage);
+    this.view = new SceneView(this.stage, table);
+    this.overlay = document.createElement('div');
+    this.overlay.className = 'viewer-overlay';
+    this.stage.appendChild(this.overlay);
+    this.store = new PartStore(this.modelId, data.parts, table.radius, table.inputVertices);
+    this.callouts = new Callouts(this.overlay, { onHover: (id) => this.setHover(id), onClick: (id) => this.select(id, true) });
+    this.preview = new Preview(this.stage);
+    this.panel = new InfoPanel(root, { canEdit: !!data.can_edit, onClose: () => this.select(null, false) });
+    this.foveaLayer = document.createElement('div');
+    this.foveaLayer.className = 'fovea-layer';
+    this.overlay.appendChild(this.foveaLayer);
+
+    this.pool = new DecoderPool();
+    this.streamer = new Streamer({
+      modelId: this.modelId,
+      table,
+      pool: this.pool,
+      onLoad: (node, patch) => this.patchLoaded(node, patch),
+      onEvict: (node) => {
+        this.view.removePatch(node);
+        this.store.removePatch(node);
+      },
+      onChange: () => this.requestFrame(),
+    });
+    this.nav = new Navigation(this.view, table, () => {
+      this.layoutDirty = true;
+      this.requestFrame();
+    });
+    this.toolbar = makeToolbar(root, this.streamer.settings, {
+      reset: () => this.nav.reset(),
+      toggleFoveaMode: (on) => {
+        this.foveaMode = on;
+        this.stage.classList.toggle('fovea-mode', on);
+      },
+      clearFoveae: () => this.setFoveae([]),
+      setSettings: (changes) => {
+        this.streamer.setSettings(changes);
+        this.requestFrame();
+      },
+    });
+    this.store.onChange(() => this.partsChanged());
+    this.bindPointer();
+    new ResizeObserver(() => {
+      this.layoutDirty = true;
+      this.requestFrame();
+    }).observe(this.stage);
+    this.stopLive = listen(this.modelId, this.store, (ev) => this.liveEvent(ev));
+    this.land();
+    this.store.loadBitmaps();
+    this.requestFrame();
+  }
+
+  /** Initial camera: the URL's, else the linked part's best view, else the home view. */
+  land() {
+    const fromUrl = parseCamera(window.location.hash);
+    const part = linkedPart(window.location.search);
+    if (fromUrl) this.nav.set(fromUrl);
+    else if (part && this.store.parts.has(part)) this.nav.set(this.bestView(part));
+    else this.nav.set(this.nav.home);
+    if (part && this.store.parts.has(part)) {
+      this.select(part, true);
+      if (!fromUrl) {
+        // Once the part's vertices are known, frame it again from its real extent and normal.
+        this.store.loadBitmaps().then(() => {
+          const e = this.store.parts.get(part);
+          if (e && !e.part.camera && this.selected === part) this.nav.animateTo(this.bestView(part), 300);
+        });
+      }
+    }
+  }
+
+  /** The part's best view: its stored camera, else a framing of its centre and extent. */
+  bestView(id) {
+    const e = this.store.parts.get(id);
+    if (e.part.camera) return e.part.camera;
+    const c = e.part.center;
+    const normal = this.store.normal(id);
+    const out = c.map((v, k) => v - this.table.center[k]);
+    const dir = normal || (Math.hypot(...out) > 1e-9 ? out : [0, 0, 1]);
+    const up = Math.abs(dir[1]) / (Math.hypot(...dir) || 1) > 0.9 ? [0, 0, 1] : [0, 1, 0];
+    return framing(c, Math.max(this.store.extent(id) * 1.6, this.table.radius * 0.02), dir, up);
+  }
+
+  patchLoaded(node, patch) {
+    this.view.addPatch(node, patch);
+    this.store.addPatch(node, patch);
+    this.markNode(node);
+    this.layoutDirty = true;
+    this.requestFrame();
+  }
+
+  requestFrame() {
+    if (this.pending) return;
+    this.pending = requestAnimationFrame(() => {
+      this.pending = null;
+      this.frame();
+    });
+  }
+
+  cameraState() {
+    const c = this.nav.get();
+    return { ...c, width: this.view.width, height: this.view.height };
+  }
+
+  frame() {
+    if (this.view.resize()) this.layoutDirty = true;
+    const result = this.streamer.update(this.cameraState());
+    this.result = result;
+    this.view.setDrawn(result.draw);
+    const channel = this.hovered !== null ? 1 : this.selected !== null ? 2 : 0;
+    this.view.render(channel);
+    this.frames++;
+    if (result.draw.length > 0 && this.firstImageAt === null) this.firstImageAt = performance.now() - this.started;
+    const now = performance.now();
+    if (this.layoutDirty) {
+      if (now - this.lastLayout >= CALLOUT_INTERVAL_MS) {
+        this.layoutDirty = false;
+        this.lastLayout = now;
+        this.layoutCallouts();
+      } else {
+        clearTimeout(this.layoutTimer);
+        this.layoutTimer = setTimeout(() => this.requestFrame(), CALLOUT_INTERVAL_MS);
+      }
+    }
+    this.drawFoveae();
+    this.status();
+  }
+
+  /** Screen position (CSS px) and depth of a world point, or null behind the camera. */
+  project(p) {
+    const v = new THREE.Vector3(p[0], p[1], p[2]);
+    const cam = this.view.camera;
+    const depth = v.clone().sub(cam.position).dot(cam.getWorldDirection(new THREE.Vector3()));
+    if (depth <= 0) return null;
+    v.project(cam);
+    return { x: (v.x * 0.5 + 0.5) * this.view.width, y: (-v.y * 0.5 + 0.5) * this.view.height, depth };
+  }
+
+  layoutCallouts() {
+    const items = [];
+    const pixelScale = this.view.height / (2 * Math.tan((this.view.camera.fov * Math.PI) / 360));
+    const eye = this.view.camera.position;
+    const candidates = [];
+    for (const e of this.store.parts.values()) {
+      const s = this.project(e.part.center);
+      if (!s || s.x < 0 || s.y < 0 || s.x > this.view.width || s.y > this.view.height) continue;
+      const extent = this.store.extent(e.id);
+      candidates.push({ e, s, extent, radiusPx: (extent * pixelScale) / s.depth });
+    }
+    candidates.sort((a, b) => b.radiusPx - a.radiusPx);
+    for (const [k, c] of candidates.entries()) {
+      const important = c.e.id === this.selected || c.e.id === this.hovered;
+      if (k >= 60 && !important) break;
+      const p = new THREE.Vector3(...c.e.part.center);
+      const dist = p.distanceTo(eye);
+      const hit = firstHitDistance(this.view, p);
+      const tolerance = Math.max(c.extent * 0.5, this.table.radius * 0.003);
+      if (hit < dist - tolerance) continue;
+      items.push({
+        id: c.e.id,
+        title: this.store.title(c.e.id),
+        x: c.s.x,
+        y: c.s.y,
+        radiusPx: c.radiusPx,
+        priority: (c.e.id === this.selected ? 1e9 : 0) + (c.e.id === this.hovered ? 1e8 : 0) + c.radiusPx,
+      });
+    }
+    this.callouts.layout(items, this.view.width, this.view.height, { selected: this.selected, hovered: this.hovered });
+  }
+
+  drawFoveae() {
+    this.foveaLayer.replaceChildren();
+    for (const f of this.foveae) {
+      const s = this.project(f);
+      if (!s) continue;
+      const dot = document.createElement('div');
+      dot.className = 'fovea-marker';
+      dot.style.transform = `translate(${Math.round(s.x - 6)}px, ${Math.round(s.y - 6)}px)`;
+      this.foveaLayer.appendChild(dot);
+    }
+  }
+
+  status() {
+    const r = this.result;
+    const s = this.streamer.stats;
+    const mb = (s.bytes / 1e6).toFixed(1);
+    const rate = (this.streamer.bandwidth() / 1e6).toFixed(1);
+    const quality = r.pending > 0 || r.inFlight > 0 ? 'refining' : `≤ ${this.streamer.settings.pixelError} px`;
+    this.toolbar.setStatus(`${r.draw.length} patches · ${r.triangles.toLocaleString()} triangles · ${mb} MB loaded at ${rate} MB/s · ${quality}` + (this.foveae.length ? ` · ${this.foveae.length} fovea${this.foveae.length > 1 ? 'e' : ''}` : ''));
+  }
+
+  // --- highlights -------------------------------------------------------------------------
+
+  markNode(node) {
+    const mesh = this.view.meshes.get(node);
+    if (!mesh) return;
+    const attr = mesh.geometry.getAttribute('aMark');
+    const marks = attr.array;
+    const had = mesh.userData.marked;
+    if (!had && this.hovered === null && this.selected === null) return;
+    marks.fill(0);
+    let any = false;
+    for (const [id, channel] of [
+      [this.hovered, 0],
+      [this.selected, 1],
+    ]) {
+      if (id === null) continue;
+      const verts = this.store.verticesIn(node, id);
+      if (!verts) continue;
+      for (const v of verts) marks[v * 2 + channel] = 1;
+      any = true;
+    }
+    mesh.userData.marked = any;
+    if (any || had) attr.needsUpdate = true;
+  }
+
+  markAll() {
+    for (const node of this.view.meshes.keys()) this.markNode(node);
+    this.requestFrame();
+  }
+
+  setHover(id) {
+    if (id === this.hovered) return;
+    this.hovered = id;
+    this.root.dataset.hovered = id === null ? '' : String(id);
+    if (id === null) this.preview.hide();
+    this.markAll();
+    this.layoutDirty = true;
+  }
+
+  /** Selects part `id` (null: none); `open` opens its information. */
+  select(id, open) {
+    this.selected = id;
+    this.root.dataset.selected = id === null ? '' : String(id);
+    writePart(id);
+    if (id === null) this.panel.close();
+    else if (open) this.panel.open(id, this.store);
+    this.markAll();
+    this.layoutDirty = true;
+  }
+
+  partsChanged() {
+    this.callouts.prune(new Set(this.store.parts.keys()));
+    if (this.selected !== null && !this.store.parts.has(this.selected)) this.select(null, false);
+    if (this.hovered !== null && !this.store.parts.has(this.hovered)) this.setHover(null);
+    this.markAll();
+    this.layoutDirty = true;
+    this.requestFrame();
+  }
+
+  liveEvent(ev) {
+    if (this.panel.isOpen() && this.panel.partId !== null) {
+      const e = this.store.parts.get(this.panel.partId);
+      const concerned = ev.part_id === this.panel.partId || (ev.content_id && e && e.contents.some((c) => c.id === ev.content_id));
+      if (concerned) this.panel.open(this.panel.partId, this.store);
+    }
+  }
+
+  // --- pointer ----------------------------------------------------------------------------
+
+  /** The part under or near client point (x, y): exact vertex sets, then a ring of samples. */
+  partAt(clientX, clientY) {
+    const hit = pick(this.view, clientX, clientY);
+    if (hit) {
+      const ids = this.store.partsWithAny(hit.ids);
+      if (ids.length) return { id: ids[0], hit };
+    }
+    for (let k = 0; k < 8; k++) {
+      const a = (k * Math.PI) / 4;
+      const h = pick(this.view, clientX + Math.cos(a) * NEAR_PX, clientY + Math.sin(a) * NEAR_PX);
+      if (!h) continue;
+      const ids = this.store.partsWithAny(h.ids);
+      if (ids.length) return { id: ids[0], hit: hit || h };
+    }
+    const rect = this.view.canvas.getBoundingClientRect();
+    for (const e of this.store.parts.values()) {
+      if (e.part.kind !== 'point') continue;
+      const s = this.project(e.part.center);
+      if (s && Math.hypot(s.x - (clientX - rect.left), s.y - (clientY - rect.top)) <= NEAR_PX + 2) return { id: e.id, hit };
+    }
+    return { id: null, hit };
+  }
+
+  bindPointer() {
+    const canvas = this.view.canvas;
+    let down = null;
+    let hoverQueued = null;
+    canvas.addEventListener('pointerdown', (e) => {
+      down = { x: e.clientX, y: e.clientY, t: performance.now() };
+    });
+    canvas.addEventListener('pointerup', (e) => {
+      if (!down) return;
+      const moved = Math.hypot(e.clientX - down.x, e.clientY - down.y);
+      down = null;
+      if (moved > CLICK_SLOP_PX || e.button !== 0) return;
+      this.click(e);
+    });
+    canvas.addEventListener('pointermove', (e) => {
+      if (e.buttons !== 0) return;
+      if (hoverQueued) {
+        hoverQueued = { x: e.clientX, y: e.clientY };
+        return;
+      }
+      hoverQueued = { x: e.clientX, y: e.clientY };
+      requestAnimationFrame(() => {
+        const q = hoverQueued;
+        hoverQueued = null;
+        const { id } = this.partAt(q.x, q.y);
+        this.setHover(id);
+        const rect = this.stage.getBoundingClientRect();
+        if (id !== null) this.preview.show(id, this.store, q.x - rect.left, q.y - rect.top, rect.width);
+        this.requestFrame();
+      });
+    });
+    canvas.addEventListener('pointerleave', () => {
+      this.setHover(null);
+      this.requestFrame();
+    });
+  }
+
+  click(e) {
+    if (this.foveaMode || e.ctrlKey || e.altKey || e.metaKey) {
+      const hit = pick(this.view, e.clientX, e.clientY);
+      if (hit) this.setFoveae([...this.foveae, hit.point.toArray()]);
+      if (this.foveaMode) {
+        this.foveaMode = false;
+        this.stage.classList.remove('fovea-mode');
+        this.toolbar.setFoveaMode(false);
+      }
+      return;
+    }
+    const { id } = this.partAt(e.clientX, e.clientY);
+    if (id !== null) this.select(id, true);
+    else if (this.selected !== null) this.select(null, false);
+  }
+
+  setFoveae(points) {
+    this.foveae = points;
+    this.streamer.setFoveae(points);
+    this.requestFrame();
+  }
+
+  /** Figures for tests and the streaming bench. */
+  stats() {
+    const r = this.result || { draw: [], triangles: 0, maxError: 0, foveaError: 0, pending: 0, requests: [] };
+    return {
+      ...this.streamer.stats,
+      tableBytes: this.tableBytes,
+      drawn: r.draw.length,
+      triangles: r.triangles,
+      maxError: r.maxError,
+      maxRatio: r.maxRatio,
+      foveaError: r.foveaError,
+      pending: r.pending,
+      wanted: r.requests.length,
+      inFlight: this.streamer.inFlight.size,
+      settled: this.streamer.settled(),
+      resident: this.streamer.cache.entries.size,
+      residentBytes: this.streamer.cache.bytes,
+      throughput: this.streamer.throughput.estimate(),
+      firstImageMs: this.firstImageAt,
+      frames: this.frames,
+      fileBytes: this.table.fileBytes,
+      leafBytes: this.table.leafBytes,
+      hovered: this.hovered,
+      selected: this.selected,
+      callouts: this.callouts.shownIds(),
+    };
+  }
+}
+
+async function boot() {
+  const root = document.getElementById('viewer');
+  if (!root || root.dataset.enabled !== 'true') return;
+  const dataEl = document.getElementById('viewer-data');
+  const placeholder = root.querySelector('.viewer-placeholder');
+  try {
+    const data = JSON.parse(dataEl.textContent);
+    const canvasProbe = document.createElement('canvas');
+    if (!canvasProbe.getContext('webgl2')) throw new Error('this browser has no WebGL2');
+    const { table, bytes } = await loadTable(data.model.id);
+    const viewer = new Viewer(root, table, data, bytes);
+    window.meshwikiViewer = {
+      stats: () => viewer.stats(),
+      camera: () => viewer.nav.get(),
+      setCamera: (c) => viewer.nav.set(c),
+      setFoveae: (points) => viewer.setFoveae(points),
+      setSettings: (s) => {
+        viewer.streamer.setSettings(s);
+        viewer.requestFrame();
+      },
+      select: (id) => viewer.select(id, true),
+      project: (p) => viewer.project(p),
+      partScreen: (id) => {
+        const e = viewer.store.parts.get(id);
+        return e ? viewer.project(e.part.center) : null;
+      },
+      parts: () => [...viewer.store.parts.values()].map((e) => ({ id: e.id, title: viewer.store.title(e.id), bitmap: !!e.bitmap, matched: e.matched })),
+      table: () => ({ nodeCount: table.nodeCount, fileBytes: table.fileBytes, leafBytes: table.leafBytes, center: table.center, radius: table.radius }),
+    };
+    root.dataset.ready = 'true';
+  } catch (e) {
+    console.error('meshwiki viewer:', e);
+    if (placeholder) placeholder.textContent = `The 3D view cannot be shown: ${e.message || e}`;
+    root.dataset.error = String(e.message || e);
+  }
+}
+
+boot();

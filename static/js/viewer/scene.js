@@ -1,0 +1,194 @@
+// three.js scene of the streamed patches: one mesh per resident patch, drawn with the same
+// shading as the server's renderer (shaders/render.wgsl: vertex colour or base albedo, times
+// ambient + (1 - ambient)·|n·v| from a headlight) so browser and server images agree; parts
+// are tinted per vertex (exact: marks come from original ids), the hovered/selected part gets
+// a bold outline (outline.js).
+
+import * as THREE from 'three';
+import { OutlinePass } from './outline.js';
+
+export const BACKGROUND = 0x1d2026;
+const BASE_COLOR = [209 / 255, 204 / 255, 194 / 255, 1];
+const AMBIENT = 0.25;
+/** Tints (rgb, strength) of the hovered and the selected part. */
+export const HOVER_TINT = [1, 176 / 255, 0, 0.45];
+export const SELECT_TINT = [0, 160 / 255, 1, 0.5];
+
+const VERTEX = /* glsl */ `
+in vec4 aColor;
+in vec2 aMark;
+uniform vec4 uBaseColor;
+uniform float uHasColor;
+out vec3 vNormal;
+out vec3 vWorld;
+out vec4 vColor;
+out vec2 vMark;
+void main() {
+  vec4 world = modelMatrix * vec4(position, 1.0);
+  vWorld = world.xyz;
+  vNormal = normal;
+  vColor = uHasColor > 0.5 ? aColor : uBaseColor;
+  vMark = aMark;
+  gl_Position = projectionMatrix * viewMatrix * world;
+}`;
+
+const FRAGMENT = /* glsl */ `
+uniform float uAmbient;
+uniform vec4 uHoverTint;
+uniform vec4 uSelectTint;
+in vec3 vNormal;
+in vec3 vWorld;
+in vec4 vColor;
+in vec2 vMark;
+void main() {
+  vec3 v = normalize(cameraPosition - vWorld);
+  vec3 n = vNormal;
+  float l = length(n);
+  n = l > 1e-20 ? n / l : v;
+  if (!gl_FrontFacing) n = -n;
+  float ndl = abs(dot(n, v));
+  vec3 rgb = vColor.rgb * (uAmbient + (1.0 - uAmbient) * ndl);
+  if (vMark.y > 0.5) rgb = mix(rgb, uSelectTint.rgb, uSelectTint.a);
+  else if (vMark.x > 0.5) rgb = mix(rgb, uHoverTint.rgb, uHoverTint.a);
+  gl_FragColor = vec4(clamp(rgb, 0.0, 1.0), 1.0);
+}`;
+
+export class SceneView {
+  /**
+   * @param {HTMLElement} container
+   * @param {object} table the LOD tables (bounds of each node)
+   */
+  constructor(container, table) {
+    this.table = table;
+    this.container = container;
+    this.renderer = new THREE.WebGLRenderer({ antialias: true, powerPreference: 'high-performance' });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    this.renderer.setClearColor(BACKGROUND, 1);
+    this.canvas = this.renderer.domElement;
+    this.canvas.className = 'viewer-canvas';
+    this.canvas.setAttribute('aria-label', '3D view of the model');
+    this.canvas.tabIndex = 0;
+    container.appendChild(this.canvas);
+    this.scene = new THREE.Scene();
+    this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 100);
+    this.material = new THREE.ShaderMaterial({
+      vertexShader: VERTEX,
+      fragmentShader: FRAGMENT,
+      side: THREE.DoubleSide,
+      uniforms: {
+        uBaseColor: { value: new THREE.Vector4(...BASE_COLOR) },
+        uHasColor: { value: table.hasColors ? 1 : 0 },
+        uAmbient: { value: AMBIENT },
+        uHoverTint: { value: new THREE.Vector4(...HOVER_TINT) },
+        uSelectTint: { value: new THREE.Vector4(...SELECT_TINT) },
+      },
+    });
+    this.outline = new OutlinePass(this.renderer);
+    this.meshes = new Map();
+    this.drawn = [];
+    this.width = 1;
+    this.height = 1;
+    this.resize();
+  }
+
+  /** Matches the drawing buffer to the container's size. */
+  resize() {
+    const w = Math.max(1, this.container.clientWidth);
+    const h = Math.max(1, this.container.clientHeight);
+    if (w === this.width && h === this.height) return false;
+    this.width = w;
+    this.height = h;
+    this.renderer.setSize(w, h, true);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.outline.setSize(w * this.renderer.getPixelRatio(), h * this.renderer.getPixelRatio());
+    return true;
+  }
+
+  /** Adds a decoded patch (arrays from the worker) as a hidden mesh. */
+  addPatch(node, patch) {
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(patch.positions, 3));
+    g.setAttribute('normal', new THREE.BufferAttribute(patch.normals, 3));
+    if (patch.colors) g.setAttribute('aColor', new THREE.BufferAttribute(patch.colors, 4, true));
+    const marks = new THREE.BufferAttribute(new Uint8Array(patch.vertexCount * 2), 2, false);
+    marks.setUsage(THREE.DynamicDrawUsage);
+    g.setAttribute('aMark', marks);
+    g.setIndex(new THREE.BufferAttribute(patch.indices, 1));
+    const b = this.table.bounds;
+    g.boundingSphere = new THREE.Sphere(new THREE.Vector3(b[node * 4], b[node * 4 + 1], b[node * 4 + 2]), b[node * 4 + 3]);
+    const mesh = new THREE.Mesh(g, this.material);
+    mesh.matrixAutoUpdate = false;
+    mesh.visible = false;
+    mesh.userData = { node, ids: patch.ids, vertexCount: patch.vertexCount };
+    this.scene.add(mesh);
+    this.meshes.set(node, mesh);
+    return mesh;
+  }
+
+  removePatch(node) {
+    const mesh = this.meshes.get(node);
+    if (!mesh) return;
+    this.scene.remove(mesh);
+    mesh.geometry.dispose();
+    this.meshes.delete(node);
+  }
+
+  /** Shows exactly the nodes of `draw`. */
+  setDrawn(draw) {
+    for (const node of this.drawn) {
+      const m = this.meshes.get(node);
+      if (m) m.visible = false;
+    }
+    for (const node of draw) {
+      const m = this.meshes.get(node);
+      if (m) m.visible = true;
+    }
+    this.drawn = draw;
+  }
+
+  /** Visible meshes (for picking). */
+  visibleMeshes() {
+    const out = [];
+    for (const node of this.drawn) {
+      const m = this.meshes.get(node);
+      if (m) out.push(m);
+    }
+    return out;
+  }
+
+  /** Near and far planes around what is drawn (tight near plane keeps depth precise). */
+  fitClipPlanes() {
+    const eye = this.camera.position;
+    const b = this.table.bounds;
+    let near = Infinity;
+    let far = 0;
+    for (const node of this.drawn) {
+      const d = Math.hypot(b[node * 4] - eye.x, b[node * 4 + 1] - eye.y, b[node * 4 + 2] - eye.z);
+      near = Math.min(near, d - b[node * 4 + 3]);
+      far = Math.max(far, d + b[node * 4 + 3]);
+    }
+    const c = this.table.center;
+    const dc = Math.hypot(c[0] - eye.x, c[1] - eye.y, c[2] - eye.z);
+    far = Math.max(far, dc + this.table.radius) * 1.01;
+    near = Math.max(Number.isFinite(near) ? near * 0.5 : far * 1e-3, far * 1e-5);
+    this.camera.near = near;
+    this.camera.far = far;
+    this.camera.updateProjectionMatrix();
+  }
+
+  /** Renders; `outline` (0 none, 1 hovered, 2 selected) draws the bold boundary. */
+  render(outline = 0) {
+    this.fitClipPlanes();
+    this.renderer.render(this.scene, this.camera);
+    if (outline) this.outline.render(this.scene, this.camera, outline);
+  }
+
+  dispose() {
+    for (const node of [...this.meshes.keys()]) this.removePatch(node);
+    this.material.dispose();
+    this.outline.dispose();
+    this.renderer.dispose();
+    this.canvas.remove();
+  }
+}

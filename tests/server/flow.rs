@@ -1,0 +1,227 @@
+//! The main editing scenario of issue 2, end to end, including a crash (`kill -9`) right
+//! after an accepted save.
+
+use serde_json::json;
+
+use crate::harness::*;
+
+#[test]
+fn wiki_editing_roles_search_and_crash_recovery() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+
+    // An admin creates an editor and a viewer.
+    let editor = create_user(&server, &admin, "erin", "editor");
+    let viewer = create_user(&server, &admin, "victor", "viewer");
+    let users = admin.get("/api/v1/users").json();
+    let names: Vec<&str> = users
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|u| u["username"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["admin", "erin", "victor"]);
+    assert!(users[0].get("password_hash").is_none());
+
+    // The editor creates a content whose body holds script and event-handler payloads.
+    let body = "# Lion paw\n\nThe casting seam is visible near the marmoreal toe.\n\n\
+                <script>alert('x')</script>\n\n<img src=x onerror=alert(1)>\n\n\
+                [click](javascript:alert(2)) <a href=\"#\" onclick=\"steal()\">a</a>\n";
+    let created = create_content(&editor, "Lion paw", body);
+    let id = created["id"].as_i64().unwrap();
+    assert_eq!(created["current_revision"], 1);
+    let html = created["html"].as_str().unwrap();
+    for bad in ["<script", "onerror", "onclick", "javascript:"] {
+        assert!(!html.contains(bad), "{bad} survived sanitising: {html}");
+    }
+    assert!(html.contains("<h1>Lion paw</h1>"));
+    let fetched = viewer.get(&format!("/api/v1/contents/{id}")).json();
+    assert_eq!(fetched["html"], created["html"]);
+    assert_eq!(
+        fetched["body"], body,
+        "the Markdown source is kept as written"
+    );
+
+    // A save on the current revision succeeds.
+    let r = editor.put(
+        &format!("/api/v1/contents/{id}"),
+        &json!({"base_revision": 1, "title": "Lion paw", "body": "Seam near the toe; patina differs.", "comment": "second"}),
+    );
+    assert_eq!(r.status, 200, "{}", r.text());
+    assert_eq!(r.json()["current_revision"], 2);
+
+    // A save on a stale revision gets 409 with both versions.
+    let r = editor.put(
+        &format!("/api/v1/contents/{id}"),
+        &json!({"base_revision": 1, "title": "Lion paw", "body": "stale edit", "comment": "stale"}),
+    );
+    r.assert_error(409);
+    let conflict = r.json();
+    assert_eq!(conflict["base_revision"], 1);
+    assert_eq!(conflict["current_revision"], 2);
+    assert_eq!(
+        conflict["current"]["body"],
+        "Seam near the toe; patina differs."
+    );
+    assert_eq!(conflict["yours"]["body"], "stale edit");
+
+    // History and diff show both revisions.
+    let history = viewer
+        .get(&format!("/api/v1/contents/{id}/revisions"))
+        .json();
+    let numbers: Vec<i64> = history
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["number"].as_i64().unwrap())
+        .collect();
+    assert_eq!(numbers, [2, 1]);
+    assert!(history.as_array().unwrap().iter().all(|r| r["id"].is_i64()));
+    assert_eq!(history[0]["author"], "erin");
+    let diff = viewer
+        .get(&format!("/api/v1/contents/{id}/diff?from=1&to=2"))
+        .json();
+    assert_eq!(
+        (diff["from"].as_i64(), diff["to"].as_i64()),
+        (Some(1), Some(2))
+    );
+    let unified = diff["body"]["unified"].as_str().unwrap();
+    assert!(
+        unified.contains("-The casting seam is visible"),
+        "{unified}"
+    );
+    assert!(
+        unified.contains("+Seam near the toe; patina differs."),
+        "{unified}"
+    );
+    let table = diff["body"]["html"].as_str().unwrap();
+    assert!(
+        table.contains("diff-del") && table.contains("diff-ins"),
+        "{table}"
+    );
+    assert!(!table.contains("<script"), "diff text is escaped: {table}");
+    let rev1 = viewer
+        .get(&format!("/api/v1/contents/{id}/revisions/1"))
+        .json();
+    assert_eq!(rev1["body"], body);
+    assert!(!rev1["html"].as_str().unwrap().contains("<script"));
+
+    // The viewer's save gets 403; without a session, 401.
+    let r = viewer.put(
+        &format!("/api/v1/contents/{id}"),
+        &json!({"base_revision": 2, "title": "x", "body": "viewer edit"}),
+    );
+    r.assert_error(403);
+    let anon = server.client();
+    anon.get(&format!("/api/v1/contents/{id}"))
+        .assert_error(401);
+    anon.put(
+        &format!("/api/v1/contents/{id}"),
+        &json!({"base_revision": 2, "title": "x", "body": "anonymous edit"}),
+    )
+    .assert_error(401);
+
+    // A word from the body is found by search in the very next request.
+    let r = editor.put(
+        &format!("/api/v1/contents/{id}"),
+        &json!({"base_revision": 2, "title": "Lion paw", "body": "The verdigris is quinquefoliate here.", "comment": "third"}),
+    );
+    assert_eq!(r.status, 200);
+    let hits = viewer.get("/api/v1/search?q=quinquefoliate");
+    assert_eq!(hits.status, 200);
+    let hits = hits.json();
+    assert_eq!(hits.as_array().unwrap().len(), 1, "{hits}");
+    assert_eq!(hits[0]["id"], id);
+    assert!(
+        hits[0]["snippet_html"]
+            .as_str()
+            .unwrap()
+            .contains("<b>quinquefoliate</b>")
+    );
+    // The old text is no longer found.
+    assert_eq!(viewer.get("/api/v1/search?q=marmoreal").json(), json!([]));
+
+    // Revert creates a new revision with the old text.
+    let r = editor.post(
+        &format!("/api/v1/contents/{id}/revert"),
+        &json!({"revision": 2, "base_revision": 3}),
+    );
+    assert_eq!(r.status, 200, "{}", r.text());
+    assert_eq!(r.json()["current_revision"], 4);
+    assert_eq!(r.json()["body"], "Seam near the toe; patina differs.");
+
+    // kill -9 right after an accepted save; after a restart the save is there and found.
+    let r = editor.put(
+        &format!("/api/v1/contents/{id}"),
+        &json!({"base_revision": 4, "title": "Lion paw", "body": "Survives a crash: xylographic marks.", "comment": "before crash"}),
+    );
+    assert_eq!(r.status, 200);
+    server.kill9();
+    // Simulate the index losing its last commit: the database alone is the truth.
+    let server = Server::start(dir.path());
+    let viewer = server.login("victor", "victor-password-1");
+    let c = viewer.get(&format!("/api/v1/contents/{id}")).json();
+    assert_eq!(c["current_revision"], 5);
+    assert_eq!(c["body"], "Survives a crash: xylographic marks.");
+    let hits = viewer.get("/api/v1/search?q=xylographic").json();
+    assert_eq!(hits[0]["id"], id, "{hits}");
+    assert_eq!(
+        viewer
+            .get(&format!("/api/v1/contents/{id}/revisions"))
+            .json()
+            .as_array()
+            .unwrap()
+            .len(),
+        5
+    );
+}
+
+#[test]
+fn index_catches_up_after_losing_commits() {
+    // Edits committed to the database while the index lags behind (here: the index
+    // directory is replaced by an older copy) are re-indexed on start-up.
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let c = create_content(&admin, "Snapshot", "before snapshot: aardvark");
+    let id = c["id"].as_i64().unwrap();
+    server.kill9();
+    let index = dir.path().join("index");
+    let snapshot = dir.path().join("index-snapshot");
+    copy_dir(&index, &snapshot);
+
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let r = admin.put(
+        &format!("/api/v1/contents/{id}"),
+        &json!({"base_revision": 1, "title": "Snapshot", "body": "after snapshot: bandicoot"}),
+    );
+    assert_eq!(r.status, 200);
+    let other = create_content(&admin, "Added later", "wombat");
+    server.kill9();
+
+    std::fs::remove_dir_all(&index).unwrap();
+    std::fs::rename(&snapshot, &index).unwrap();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    assert_eq!(admin.get("/api/v1/search?q=bandicoot").json()[0]["id"], id);
+    assert_eq!(admin.get("/api/v1/search?q=aardvark").json(), json!([]));
+    assert_eq!(
+        admin.get("/api/v1/search?q=wombat").json()[0]["id"],
+        other["id"]
+    );
+}
+
+fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
+}

@@ -1,0 +1,166 @@
+//! Build jobs: malformed uploads fail with the importer's message and leave nothing behind,
+//! a running build is cancelled cleanly, a queued one at once, and a build interrupted by a
+//! crash (kill -9) restarts and completes on the next start.
+
+use std::path::Path;
+
+use serde_json::json;
+
+use crate::harness::*;
+use crate::lod::{names, relief_ply, upload_scan, wait_finished, wait_job};
+
+/// Triangles of the input of the cancel and crash tests: a build that takes seconds on one
+/// thread, so it can be caught running.
+const LARGE: u64 = 700_000;
+
+fn no_leftovers(data: &Path) {
+    assert!(
+        names(&data.join("uploads")).is_empty(),
+        "uploads: {:?}",
+        names(&data.join("uploads"))
+    );
+    let models = names(&data.join("models"));
+    assert!(
+        models
+            .iter()
+            .all(|n| !n.contains(".build-") && !n.contains(".tmp")),
+        "models: {models:?}"
+    );
+}
+
+#[test]
+fn malformed_uploads_fail_with_the_importers_message() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let scans = tempfile::tempdir().unwrap();
+    let good = std::fs::read(relief_ply(scans.path(), "r.ply", 4_000)).unwrap();
+    let mut garbage = vec![0u8; 4096];
+    for (i, b) in garbage.iter_mut().enumerate() {
+        *b = (i * 7919 % 251) as u8;
+    }
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("truncated.ply", good[..good.len() / 2].to_vec(), "truncated"),
+        ("garbage.ply", garbage.clone(), "garbage.ply"),
+        ("nan.obj", b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n".to_vec(), "line 2"),
+        ("index.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n".to_vec(), "out of range"),
+        ("empty.stl", b"solid x\nendsolid x\n".to_vec(), "empty.stl"),
+    ];
+    for (name, data, expect) in cases {
+        let r = upload_scan(&admin, name, name, data);
+        assert_eq!(r.status, 202, "{name}: {}", r.text());
+        let j = r.json();
+        let (job, model) = (
+            j["job"]["id"].as_i64().unwrap(),
+            j["model"]["id"].as_i64().unwrap(),
+        );
+        let job = wait_finished(&admin, job, 60);
+        assert_eq!(job["status"], "failed", "{name}: {job}");
+        let msg = job["message"].as_str().unwrap();
+        assert!(msg.contains(name), "{name}: the message names the file: {msg}");
+        assert!(msg.contains(expect), "{name}: {msg}");
+        assert!(!msg.contains("src-"), "internal upload name leaked: {msg}");
+        let m = admin.get(&format!("/api/v1/models/{model}")).json();
+        assert_eq!(m["status"], "failed");
+        assert_eq!(m["error"].as_str(), Some(msg));
+        let e = admin
+            .get(&format!("/api/v1/models/{model}/lod"))
+            .assert_error(409);
+        assert!(e.contains("failed"), "{e}");
+        // The model page shows the error (no JavaScript needed).
+        assert!(admin.get(&format!("/models/{model}")).text().contains("failed"));
+    }
+    no_leftovers(dir.path());
+    assert!(names(&dir.path().join("models")).is_empty());
+}
+
+#[test]
+fn cancelling_running_and_queued_builds() {
+    let dir = data_dir_with_admin();
+    let server = Server::start_with(dir.path(), &["--build-threads", "1"]);
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let scans = tempfile::tempdir().unwrap();
+    let big = std::fs::read(relief_ply(scans.path(), "big.ply", LARGE)).unwrap();
+    let small = std::fs::read(relief_ply(scans.path(), "small.ply", 2_000)).unwrap();
+
+    let r = upload_scan(&admin, "Big", "big.ply", big);
+    assert_eq!(r.status, 202, "{}", r.text());
+    let (job, model) = (
+        r.json()["job"]["id"].as_i64().unwrap(),
+        r.json()["model"]["id"].as_i64().unwrap(),
+    );
+    // One build at a time: the next upload waits in the queue.
+    let r = upload_scan(&admin, "Small", "small.ply", small);
+    let (queued, queued_model) = (
+        r.json()["job"]["id"].as_i64().unwrap(),
+        r.json()["model"]["id"].as_i64().unwrap(),
+    );
+    let running = wait_job(&admin, job, 60, |j| j["status"] == "running");
+    assert_eq!(
+        admin.get(&format!("/api/v1/jobs/{queued}")).json()["status"],
+        "queued"
+    );
+    let e = admin
+        .get(&format!("/api/v1/models/{model}/lod"))
+        .assert_error(409);
+    assert!(e.contains("building") || e.contains("pending"), "{e}: {running}");
+
+    // Cancel the queued job: at once.
+    let r = admin.post(&format!("/api/v1/jobs/{queued}/cancel"), &json!({}));
+    assert_eq!(r.status, 200, "{}", r.text());
+    assert_eq!(r.json()["status"], "cancelled");
+    let m = admin.get(&format!("/api/v1/models/{queued_model}")).json();
+    assert_eq!(m["status"], "failed");
+
+    // Cancel the running one: it stops soon and leaves nothing.
+    let r = admin.post(&format!("/api/v1/jobs/{job}/cancel"), &json!({}));
+    assert_eq!(r.status, 202, "{}", r.text());
+    let j = wait_finished(&admin, job, 60);
+    assert_eq!(j["status"], "cancelled", "{j}");
+    let m = admin.get(&format!("/api/v1/models/{model}")).json();
+    assert_eq!(m["status"], "failed");
+    assert_eq!(m["error"], "build cancelled");
+    no_leftovers(dir.path());
+    assert!(names(&dir.path().join("models")).is_empty());
+}
+
+#[test]
+fn a_build_interrupted_by_a_crash_restarts() {
+    let dir = data_dir_with_admin();
+    let server = Server::start_with(dir.path(), &["--build-threads", "1"]);
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let scans = tempfile::tempdir().unwrap();
+    let big = std::fs::read(relief_ply(scans.path(), "big.ply", LARGE)).unwrap();
+    let r = upload_scan(&admin, "Crash", "big.ply", big);
+    assert_eq!(r.status, 202, "{}", r.text());
+    let (job, model) = (
+        r.json()["job"]["id"].as_i64().unwrap(),
+        r.json()["model"]["id"].as_i64().unwrap(),
+    );
+    // Wait until the build has scratch files on disk, then kill -9.
+    wait_job(&admin, job, 60, |j| {
+        j["status"] == "running" && j["stage"] != "" && j["stage"] != "import"
+    });
+    let models_dir = dir.path().join("models");
+    let scratch: Vec<String> = names(&models_dir)
+        .into_iter()
+        .filter(|n| n.contains(".build-"))
+        .collect();
+    assert_eq!(scratch.len(), 1, "{:?}", names(&models_dir));
+    server.kill9();
+    assert!(models_dir.join(&scratch[0]).exists());
+    // An unclaimed upload and a stale temporary file are leftovers too.
+    std::fs::write(dir.path().join("uploads/src-deadbeef.ply"), b"x").unwrap();
+
+    let server = Server::start_with(dir.path(), &["--build-threads", "2"]);
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    assert!(!models_dir.join(&scratch[0]).exists(), "leftover removed");
+    let j = wait_finished(&admin, job, 180);
+    assert_eq!(j["status"], "done", "{j}");
+    assert_eq!(j["attempts"], 2);
+    let m = admin.get(&format!("/api/v1/models/{model}")).json();
+    assert_eq!(m["status"], "ready");
+    assert_eq!(admin.get(&format!("/api/v1/models/{model}/lod")).status, 200);
+    no_leftovers(dir.path());
+    assert_eq!(names(&models_dir), vec![format!("{model}.mwlod")]);
+}

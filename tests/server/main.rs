@@ -1,0 +1,12 @@
+//! Integration tests of the knowledge server: the real binary, a real SQLite file in a
+//! temporary directory, real HTTP on an ephemeral port.
+
+mod cli;
+mod concurrency;
+mod flow;
+mod harness;
+mod import;
+mod jobs;
+mod lod;
+mod pages;
+mod security;

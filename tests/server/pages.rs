@@ -1,0 +1,307 @@
+//! The HTML pages: login, model and content pages, editing with preview, the 409 merge
+//! page, history, diff, revert, search, admin users; all readable without JavaScript.
+
+use serde_json::json;
+
+use crate::harness::*;
+
+/// Value of the hidden CSRF field in a page.
+fn csrf_of(html: &str) -> String {
+    let marker = "name=\"csrf_token\" value=\"";
+    let start = html.find(marker).expect("csrf field") + marker.len();
+    html[start..start + 64].to_string()
+}
+
+/// Logs in through the HTML form; returns a client with the session cookie.
+fn form_login(server: &Server, user: &str, password: &str) -> Client {
+    let mut c = server.client();
+    let r = c.post_form(
+        "/login",
+        &[
+            ("username", user),
+            ("password", password),
+            ("next", "/contents"),
+        ],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    assert_eq!(r.header("location"), Some("/contents"));
+    let cookie = r.header("set-cookie").unwrap();
+    assert!(cookie.contains("HttpOnly"));
+    c.cookie = Some(cookie.split(';').next().unwrap().to_string());
+    c
+}
+
+#[test]
+fn pages_work_without_javascript() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let anon = server.client();
+
+    // Pages redirect to the login page; the login page renders; a wrong password is refused.
+    let r = anon.get("/contents/1/edit");
+    assert_eq!(r.status, 303);
+    assert_eq!(r.header("location"), Some("/login?next=/contents/1/edit"));
+    let r = anon.get("/login");
+    assert_eq!(r.status, 200);
+    assert!(r.text().contains("<form method=\"post\" action=\"/login\""));
+    let r = anon.post_form(
+        "/login",
+        &[("username", "admin"), ("password", "nope-nope")],
+    );
+    assert_eq!(r.status, 401);
+    assert!(r.text().contains("Invalid user name or password"));
+    // An open redirect through `next` is refused.
+    let mut c = server.client();
+    let r = c.post_form(
+        "/login",
+        &[
+            ("username", "admin"),
+            ("password", ADMIN_PASSWORD),
+            ("next", "//evil.example/"),
+        ],
+    );
+    assert_eq!(r.header("location"), Some("/"));
+    c.cookie = None;
+
+    let admin = form_login(&server, "admin", ADMIN_PASSWORD);
+
+    // Admin pages: create an editor through the form.
+    let page = admin.get("/admin/users");
+    assert_eq!(page.status, 200);
+    let csrf = csrf_of(&page.text());
+    let r = admin.post_form(
+        "/admin/users",
+        &[
+            ("csrf_token", &csrf),
+            ("username", "edna"),
+            ("password", "edna-password"),
+            ("role", "editor"),
+        ],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    assert!(admin.get("/admin/users").text().contains("edna"));
+    // Demoting yourself is refused.
+    let r = admin.post_form(
+        "/admin/users/1",
+        &[("csrf_token", &csrf), ("role", "viewer")],
+    );
+    assert_eq!(r.status, 409);
+
+    // A model record and its page with the viewer placeholder.
+    let r = admin.post_form(
+        "/models",
+        &[
+            ("csrf_token", &csrf),
+            ("title", "Temple gate"),
+            ("description", "A *wooden* gate"),
+        ],
+    );
+    assert_eq!(r.status, 303);
+    let model_url = r.header("location").unwrap().to_string();
+    let model_id: i64 = model_url.rsplit('/').next().unwrap().parse().unwrap();
+    let model_page = admin.get(&model_url).text();
+    assert!(model_page.contains(&format!("<div id=\"viewer\" data-model-id=\"{model_id}\"")));
+    assert!(model_page.contains("<em>wooden</em>"));
+    assert!(admin.get("/models").text().contains("Temple gate"));
+
+    let editor = form_login(&server, "edna", "edna-password");
+    // Editors cannot open admin pages.
+    assert_eq!(editor.get("/admin/users").status, 403);
+
+    // New content with preview, then save.
+    let page = editor.get("/contents/new");
+    assert_eq!(page.status, 200);
+    let csrf = csrf_of(&page.text());
+    let r = editor.post_form(
+        "/contents/new",
+        &[
+            ("csrf_token", &csrf),
+            ("title", "Gate <b>beam</b>"),
+            ("caption", "cap"),
+            ("body", "**bold** <script>x()</script>"),
+            ("comment", "c"),
+            ("action", "preview"),
+        ],
+    );
+    assert_eq!(r.status, 200);
+    let text = r.text();
+    assert!(text.contains("<strong>bold</strong>"));
+    assert!(!text.contains("<script>x()"));
+    assert!(
+        text.contains("beam") && !text.contains("<b>beam"),
+        "titles are escaped"
+    );
+    let r = editor.post_form(
+        "/contents/new",
+        &[
+            ("csrf_token", &csrf),
+            ("title", "Gate beam"),
+            ("caption", "cap"),
+            ("body", "Line one\r\nLine two"),
+            ("comment", "first"),
+            ("action", "save"),
+        ],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    let url = r.header("location").unwrap().to_string();
+    let id: i64 = url.rsplit('/').next().unwrap().parse().unwrap();
+    let view = editor.get(&url).text();
+    assert!(view.contains("Gate beam") && view.contains("Line one\nLine two"));
+
+    // Two editors open the edit page on revision 1; the first save wins, the second gets
+    // the 409 merge page showing both versions.
+    let edit_page = editor.get(&format!("/contents/{id}/edit")).text();
+    assert!(edit_page.contains("name=\"base_revision\" value=\"1\""));
+    let r = editor.post_form(
+        &format!("/contents/{id}/edit"),
+        &[
+            ("csrf_token", &csrf),
+            ("base_revision", "1"),
+            ("title", "Gate beam"),
+            ("caption", "cap"),
+            ("body", "Theirs: carved dragons"),
+            ("comment", "theirs"),
+            ("action", "save"),
+        ],
+    );
+    assert_eq!(r.status, 303);
+    let r = editor.post_form(
+        &format!("/contents/{id}/edit"),
+        &[
+            ("csrf_token", &csrf),
+            ("base_revision", "1"),
+            ("title", "Gate beam"),
+            ("caption", "cap"),
+            ("body", "Mine: painted phoenixes"),
+            ("comment", "mine"),
+            ("action", "save"),
+        ],
+    );
+    assert_eq!(r.status, 409);
+    let merge = r.text();
+    assert!(merge.contains("Edit conflict"));
+    assert!(merge.contains("carved dragons"), "theirs shown");
+    assert!(merge.contains("painted phoenixes"), "yours shown");
+    assert!(
+        merge.contains("name=\"base_revision\" value=\"2\""),
+        "merge form based on theirs"
+    );
+    // Saving the merged text from the merge page works.
+    let r = editor.post_form(
+        &format!("/contents/{id}/edit"),
+        &[
+            ("csrf_token", &csrf),
+            ("base_revision", "2"),
+            ("title", "Gate beam"),
+            ("caption", "cap"),
+            ("body", "Carved dragons and painted phoenixes"),
+            ("comment", "merged"),
+            ("action", "save"),
+        ],
+    );
+    assert_eq!(r.status, 303);
+
+    // History, diff between any two revisions, an old revision, revert.
+    let history = editor.get(&format!("/contents/{id}/history")).text();
+    for n in ["merged", "theirs", "first"] {
+        assert!(history.contains(n), "{n} in history");
+    }
+    let diff = editor
+        .get(&format!("/contents/{id}/diff?from=1&to=3"))
+        .text();
+    assert!(diff.contains("Revision 1 → 3"));
+    assert!(diff.contains("diff-del") && diff.contains("diff-ins"));
+    let old = editor.get(&format!("/contents/{id}/revisions/2")).text();
+    assert!(old.contains("carved dragons") && old.contains("Revert to this revision"));
+    let r = editor.post_form(
+        &format!("/contents/{id}/revert"),
+        &[
+            ("csrf_token", &csrf),
+            ("revision", "2"),
+            ("base_revision", "3"),
+        ],
+    );
+    assert_eq!(r.status, 303);
+    let view = editor.get(&format!("/contents/{id}")).text();
+    assert!(view.contains("Theirs: carved dragons") && view.contains("Revision 4"));
+
+    // Upload an attachment from the edit page (CSRF field first), then see it listed.
+    let r = editor.upload(
+        &format!("/contents/{id}/attachments"),
+        &[("csrf_token", &csrf)],
+        "gate.png",
+        "image/png",
+        b"png",
+        false,
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    let r = editor.upload(
+        &format!("/contents/{id}/attachments"),
+        &[],
+        "gate2.png",
+        "image/png",
+        b"png",
+        false,
+    );
+    assert_eq!(r.status, 403);
+    assert!(
+        editor
+            .get(&format!("/contents/{id}/edit"))
+            .text()
+            .contains("gate.png")
+    );
+
+    // Assign the content to a part of the model from the model page.
+    let mut api_admin = server.client();
+    api_admin.login("admin", ADMIN_PASSWORD);
+    let part = api_admin
+        .post(
+            &format!("/api/v1/models/{model_id}/parts"),
+            &json!({"kind": "point", "center": [0, 1, 2]}),
+        )
+        .json();
+    let pid = part["id"].as_i64().unwrap();
+    let r = editor.post_form(
+        &format!("/parts/{pid}/contents"),
+        &[("csrf_token", &csrf), ("content_id", &id.to_string())],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    let model_page = editor.get(&model_url).text();
+    assert!(model_page.contains(&format!("href=\"/contents/{id}\"")));
+    assert!(
+        editor
+            .get(&format!("/contents/{id}"))
+            .text()
+            .contains("Temple gate")
+    );
+
+    // Search page: ranked hits with highlighted snippets, model filter.
+    let r = editor.get("/search?q=dragons&model=");
+    assert_eq!(r.status, 200);
+    let text = r.text();
+    assert!(text.contains("<b>dragons</b>"), "{text}");
+    assert!(text.contains(&format!("href=\"/contents/{id}\"")));
+    let text = editor
+        .get(&format!("/search?q=temple&model={model_id}"))
+        .text();
+    assert!(text.contains(&format!("href=\"/contents/{id}\"")));
+    assert!(
+        editor
+            .get("/search?q=%3Cscript%3E")
+            .text()
+            .contains("0 results")
+    );
+
+    // Unknown pages: HTML 404; static CSS served.
+    let r = editor.get("/contents/99999");
+    assert_eq!(r.status, 404);
+    assert!(r.text().contains("<html"));
+    let css = editor.get("/static/style.css");
+    assert_eq!(css.status, 200);
+    assert!(css.header("content-type").unwrap().starts_with("text/css"));
+
+    // Log out through the form.
+    let r = editor.post_form("/logout", &[("csrf_token", &csrf)]);
+    assert_eq!(r.status, 303);
+    assert_eq!(editor.get("/contents").status, 303);
+}
