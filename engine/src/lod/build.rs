@@ -26,10 +26,13 @@ use super::simplify::{merge, simplify_group, split};
 use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink};
 use crate::progress::Progress;
 use rayon::prelude::*;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 use std::io;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// Buckets partitioned at the same time (bounds the memory of the leaf stage).
+const BUCKET_WORKERS: usize = 4;
 
 /// Build settings.
 #[derive(Debug, Clone)]
@@ -450,9 +453,11 @@ impl<'a> Builder<'a> {
         threads: usize,
     ) -> Result<Vec<PoolItem>, BuildError> {
         let tris = ingested.triangle_count as usize;
-        // ~300 bytes of working memory per triangle while partitioning a bucket.
-        let by_memory = self.options.memory_budget * 2 / 5 / (threads * 300);
-        let for_parallelism = (tris / (threads * 3)).max(self.options.max_patch_triangles * 16);
+        // Bucket size depends on the input and the budget only, never on the thread count, so
+        // a build gives the same file on every machine. ~300 bytes of working memory per
+        // triangle while partitioning; at most BUCKET_WORKERS buckets are in memory at once.
+        let by_memory = self.options.memory_budget * 2 / 5 / (BUCKET_WORKERS * 300);
+        let for_parallelism = (tris / 12).max(self.options.max_patch_triangles * 16);
         let bucket_max = by_memory
             .min(for_parallelism)
             .max(self.options.max_patch_triangles * 4);
@@ -475,25 +480,31 @@ impl<'a> Builder<'a> {
         let colors = ingested.colors.as_ref().map(|c| c.as_slice());
         let max = self.options.max_patch_triangles;
         let this = &*self;
-        let results: Vec<Result<Vec<Stored>, BuildError>> = buckets
-            .par_iter()
-            .map(|bucket| {
-                if this.progress.cancelled() {
-                    return Err(BuildError::Cancelled);
-                }
-                let faces = read_bucket(bucket)?;
-                let _ = std::fs::remove_file(&bucket.path);
-                let mesh = bucket_mesh(&faces, positions, normals, colors);
-                drop(faces);
-                let patches = split(&mesh, &mesh.indices, max);
-                let stored = patches
-                    .iter()
-                    .map(|p| this.store(p, 0))
-                    .collect::<io::Result<Vec<_>>>()?;
-                this.progress.advance(1);
-                Ok(stored)
-            })
-            .collect();
+        let workers = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.min(BUCKET_WORKERS))
+            .build()
+            .map_err(|e| BuildError::Io(io::Error::other(e.to_string())))?;
+        let results: Vec<Result<Vec<Stored>, BuildError>> = workers.install(|| {
+            buckets
+                .par_iter()
+                .map(|bucket| {
+                    if this.progress.cancelled() {
+                        return Err(BuildError::Cancelled);
+                    }
+                    let faces = read_bucket(bucket)?;
+                    let _ = std::fs::remove_file(&bucket.path);
+                    let mesh = bucket_mesh(&faces, positions, normals, colors);
+                    drop(faces);
+                    let patches = split(&mesh, &mesh.indices, max);
+                    let stored = patches
+                        .iter()
+                        .map(|p| this.store(p, 0))
+                        .collect::<io::Result<Vec<_>>>()?;
+                    this.progress.advance(1);
+                    Ok(stored)
+                })
+                .collect()
+        });
         let mut pool = Vec::new();
         for r in results {
             for s in r? {
@@ -563,8 +574,10 @@ impl<'a> Builder<'a> {
                     let merged = merge(&refs);
                     // A vertex used by more pool patches than group members holding it is
                     // shared with a patch outside the group.
-                    let mut inside: HashMap<u32, u8> =
-                        HashMap::with_capacity(merged.patch.ids.len());
+                    let mut inside: HashMap<u32, u8> = HashMap::with_capacity_and_hasher(
+                        merged.patch.ids.len(),
+                        Default::default(),
+                    );
                     for p in &patches {
                         for &id in &p.ids {
                             let c = inside.entry(id).or_insert(0);
@@ -814,7 +827,7 @@ fn outline(patch: &BuildPatch, border: &[u64]) -> PatchOutline {
     ids.sort_unstable();
     ids.dedup();
     let lookup: HashMap<u32, usize> = if ids.is_empty() {
-        HashMap::new()
+        HashMap::default()
     } else {
         patch
             .ids

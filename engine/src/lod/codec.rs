@@ -19,7 +19,7 @@
 use meshopt::{
     decode_index_buffer, decode_vertex_buffer, encode_index_buffer, encode_vertex_buffer,
 };
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 /// Blob magic, first 4 bytes.
 pub const BLOB_MAGIC: [u8; 4] = *b"MWP2";
@@ -242,7 +242,7 @@ impl Predictor {
     fn new(n: usize) -> Self {
         Predictor {
             known: vec![false; n],
-            opposite: HashMap::with_capacity(n * 3),
+            opposite: HashMap::with_capacity_and_hasher(n * 3, Default::default()),
             last: None,
         }
     }

@@ -6,7 +6,7 @@
 //! scan, so they still coarsen together).
 
 use meshopt::VertexDataAdapter;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 /// What grouping needs to know about one patch of the current level.
 pub struct PatchOutline {
@@ -24,7 +24,7 @@ pub fn group_patches(outlines: &[PatchOutline], group_size: usize) -> Vec<Vec<us
     if n <= group_size {
         return vec![(0..n).collect()];
     }
-    let mut compact: HashMap<u32, u32> = HashMap::new();
+    let mut compact: HashMap<u32, u32> = HashMap::default();
     let mut positions: Vec<[f32; 3]> = Vec::new();
     let mut indices: Vec<u32> = Vec::new();
     let mut counts: Vec<u32> = Vec::with_capacity(n);

@@ -39,8 +39,8 @@ impl<'a> TriangleGrid<'a> {
             hi = Vec3::ZERO;
         }
         let extent = (hi - lo).max(Vec3::splat(1e-12));
-        let mut cell = (2.0 * (area / tri_count.max(1) as f64).sqrt()) as f32;
-        let max_cells = (tri_count * 4).max(64) as f32;
+        let mut cell = (1.4 * (area / tri_count.max(1) as f64).sqrt()) as f32;
+        let max_cells = (tri_count * 16).max(64) as f32;
         if !(cell > 0.0) {
             cell = extent.max_element() / 8.0;
         }
@@ -263,13 +263,37 @@ pub fn simplification_distance(
         seen[v] = true;
         worst = worst.max(to_simplified.distance(positions[v]));
     }
+    // Simplified triangles that are input triangles lie on the input (distance 0), and so do
+    // their edges: only the changed ones are sampled.
+    let canonical = |t: &[u32]| {
+        let r = if t[1] < t[0] && t[1] < t[2] {
+            1
+        } else if t[2] < t[0] && t[2] < t[1] {
+            2
+        } else {
+            0
+        };
+        [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
+    };
+    let unchanged: rustc_hash::FxHashSet<[u32; 3]> = input.chunks_exact(3).map(canonical).collect();
+    let input_edges: rustc_hash::FxHashSet<(u32, u32)> = input
+        .chunks_exact(3)
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .map(|(u, v)| (u.min(v), u.max(v)))
+        .collect();
     let to_input = TriangleGrid::new(positions, input);
     let mut edges: Vec<(u32, u32)> = Vec::with_capacity(simplified.len());
     for t in simplified.chunks_exact(3) {
+        if unchanged.contains(&canonical(t)) {
+            continue;
+        }
         let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
         worst = worst.max(to_input.distance(((a + b + c) / 3.0).into()));
         for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-            edges.push((u.min(v), u.max(v)));
+            let e = (u.min(v), u.max(v));
+            if !input_edges.contains(&e) {
+                edges.push(e);
+            }
         }
     }
     edges.sort_unstable();

@@ -338,9 +338,15 @@ fn partition_graph(graph: &Graph, max_triangles: usize) -> Vec<u32> {
     labels
 }
 
+/// METIS (through GKlib) keeps its random number generator in unsynchronised global state:
+/// concurrent calls race on it, which makes results depend on thread timing and can read out
+/// of bounds. Every METIS call in the process goes through this lock.
+pub static METIS_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// METIS on the subgraph induced by `nodes`; `None` if METIS refuses.
 fn metis_subgraph(graph: &Graph, nodes: &[u32], parts: usize) -> Option<Vec<Idx>> {
-    let mut local = std::collections::HashMap::with_capacity(nodes.len());
+    let mut local =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(nodes.len(), Default::default());
     for (k, &v) in nodes.iter().enumerate() {
         local.insert(v, k as Idx);
     }
@@ -362,6 +368,9 @@ fn metis_subgraph(graph: &Graph, nodes: &[u32], parts: usize) -> Option<Vec<Idx>
     }
     let mut part = vec![0 as Idx; nodes.len()];
     let ubvec = [1.06 as metis::Real];
+    let _metis = METIS_LOCK
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
     let result = metis::Graph::new(1, parts as Idx, &xadj, &adjncy)
         .ok()?
         .set_vwgt(&vwgt)
@@ -406,7 +415,7 @@ fn spatial_split(graph: &Graph, nodes: &[u32], parts: usize) -> Vec<Idx> {
 
 /// Renumbers labels densely in order of first appearance; returns the label count.
 fn compact_labels(labels: &mut [u32]) -> usize {
-    let mut map = std::collections::HashMap::new();
+    let mut map = rustc_hash::FxHashMap::default();
     for l in labels.iter_mut() {
         let next = map.len() as u32;
         *l = *map.entry(*l).or_insert(next);

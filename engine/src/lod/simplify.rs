@@ -11,7 +11,7 @@ use super::hausdorff::simplification_distance;
 use super::partition::{Triangles, partition};
 use super::patch::{BuildPatch, edge_key};
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 /// A group step fails (members stay for the next level) above this triangle ratio.
 pub const MIN_REDUCTION: f32 = 0.85;
@@ -34,7 +34,8 @@ pub struct Merged {
 /// Concatenates member patches, welding shared vertices by original ID.
 pub fn merge(members: &[&BuildPatch]) -> Merged {
     let vertex_hint: usize = members.iter().map(|m| m.ids.len()).sum();
-    let mut local: HashMap<u32, u32> = HashMap::with_capacity(vertex_hint);
+    let mut local: HashMap<u32, u32> =
+        HashMap::with_capacity_and_hasher(vertex_hint, Default::default());
     let has_colors = members.iter().all(|m| !m.colors.is_empty());
     let has_normals = members.iter().all(|m| !m.normals.is_empty());
     let mut out = BuildPatch::default();
@@ -78,7 +79,8 @@ pub fn simplify_group(
         return None;
     }
     let (positions, coincident) = distinct_positions(&mesh.positions);
-    let mut locks = border_locks(mesh);
+    let border = id_border(mesh, &mesh.indices);
+    let mut locks = border_locks(mesh, &border);
     for (v, lock) in locks.iter_mut().enumerate() {
         // Coincident twins (scanner "zipper" seams) are locked too: collapsing one onto the
         // other would glue two boundary sheets together and change the scan's boundary.
@@ -130,7 +132,6 @@ pub fn simplify_group(
             )
         }
     };
-    let border = id_border(mesh, &mesh.indices);
     let mut simplified = run(&locks);
     if id_border(mesh, &simplified) != border {
         // The simplifier changed the border through some non-manifold configuration: lock the
@@ -164,7 +165,8 @@ pub fn simplify_group(
 /// vertices); scans contain coincident vertices with distinct IDs, and the topology must be
 /// the IDs' or the simplifier opens holes.
 fn distinct_positions(positions: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<bool>) {
-    let mut first: HashMap<[u32; 3], usize> = HashMap::with_capacity(positions.len());
+    let mut first: HashMap<[u32; 3], usize> =
+        HashMap::with_capacity_and_hasher(positions.len(), Default::default());
     let mut coincident = vec![false; positions.len()];
     let mut out = Vec::with_capacity(positions.len());
     for (i, p) in positions.iter().enumerate() {
@@ -219,31 +221,25 @@ fn lock_one_ring(mesh: &BuildPatch, locks: &mut [SimplifyVertex]) {
     }
 }
 
-/// Lock flags: vertices on edges used by a single triangle of the merged group.
-fn border_locks(mesh: &BuildPatch) -> Vec<SimplifyVertex> {
-    let mut locks = vec![SimplifyVertex::None; mesh.ids.len()];
-    let mut edges: Vec<(u64, u32, u32)> = mesh
-        .indices
-        .chunks_exact(3)
-        .flat_map(|t| {
-            [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]
-                .map(|(a, b)| (edge_key(mesh.ids[a as usize], mesh.ids[b as usize]), a, b))
+/// Lock flags: the vertices of the group's border edges (original-ID keys from [`id_border`]).
+fn border_locks(mesh: &BuildPatch, border: &[u64]) -> Vec<SimplifyVertex> {
+    let on_border: rustc_hash::FxHashSet<u32> = border
+        .iter()
+        .flat_map(|&e| {
+            let (a, b) = super::patch::edge_ends(e);
+            [a, b]
         })
         .collect();
-    edges.sort_unstable_by_key(|e| e.0);
-    let mut i = 0;
-    while i < edges.len() {
-        let mut j = i + 1;
-        while j < edges.len() && edges[j].0 == edges[i].0 {
-            j += 1;
-        }
-        if j - i == 1 {
-            locks[edges[i].1 as usize] = SimplifyVertex::Lock;
-            locks[edges[i].2 as usize] = SimplifyVertex::Lock;
-        }
-        i = j;
-    }
-    locks
+    mesh.ids
+        .iter()
+        .map(|id| {
+            if on_border.contains(id) {
+                SimplifyVertex::Lock
+            } else {
+                SimplifyVertex::None
+            }
+        })
+        .collect()
 }
 
 /// Splits simplified triangles (indexing `mesh`'s vertices) into compact patches.
@@ -257,7 +253,7 @@ pub fn split(mesh: &BuildPatch, indices: &[u32], max_triangles: usize) -> Vec<Bu
         max_triangles,
     );
     let mut products: Vec<BuildPatch> = (0..count).map(|_| BuildPatch::default()).collect();
-    let mut local: Vec<HashMap<u32, u32>> = vec![HashMap::new(); count];
+    let mut local: Vec<HashMap<u32, u32>> = vec![HashMap::default(); count];
     for (t, tri) in indices.chunks_exact(3).enumerate() {
         let p = parts[t] as usize;
         let (patch, map) = (&mut products[p], &mut local[p]);
