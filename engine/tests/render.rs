@@ -23,7 +23,28 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 
+/// Removes what earlier runs of this test binary left behind (their process is gone).
+fn remove_stale_dirs() {
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name
+            .strip_prefix("mw-render-")
+            .and_then(|r| r.split('-').next())
+        else {
+            continue;
+        };
+        if pid != std::process::id().to_string() && !Path::new("/proc").join(pid).exists() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
 fn temp_dir(name: &str) -> PathBuf {
+    static CLEANED: OnceLock<()> = OnceLock::new();
+    CLEANED.get_or_init(remove_stale_dirs);
     let dir = std::env::temp_dir().join(format!("mw-render-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     dir
@@ -1058,4 +1079,5 @@ fn one_pixel_cut_matches_full_resolution_on_a_real_scan() {
             "1 px draws far fewer triangles"
         );
     }
+    let _ = std::fs::remove_dir_all(temp_dir("scan"));
 }

@@ -270,7 +270,7 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
         FRAMES as f64 / wall
     );
     println!(
-        "  per frame: cut {:.1} ms, patch loads {:.1} ms, draw + read-back {:.1} ms (means)",
+        "  per frame: cut {:.1} ms, patch loads {:.1} ms, encode + draw + read-back {:.1} ms (means)",
         cut_ms / FRAMES as f64,
         load_ms / FRAMES as f64,
         draw_ms / FRAMES as f64

@@ -276,6 +276,7 @@ pub struct RenderStats {
     pub near: f32,
     pub cut_ms: f64,
     pub load_ms: f64,
+    /// Encoding, GPU work and read-back (everything but the cut and the patch loads).
     pub draw_ms: f64,
     pub total_ms: f64,
     pub cache: CacheStats,
@@ -548,7 +549,7 @@ impl Renderer {
     }
 
     /// The nodes a render draws, front to back.
-    pub fn select(
+    pub fn cut_nodes(
         &self,
         model: &Model,
         camera: &Camera,
@@ -601,7 +602,7 @@ impl Renderer {
             count: highlights.iter().filter(|h| h.tint.is_some()).count(),
             max: highlight::MAX_TINTS,
         })?;
-        let nodes = self.select(model, camera, &options.cut)?;
+        let nodes = self.cut_nodes(model, camera, &options.cut)?;
         let cut_ms = t0.elapsed().as_secs_f64() * 1e3;
         let records = model.lod.nodes();
         let f = camera.forward();
@@ -704,6 +705,7 @@ impl Renderer {
         nodes: &[u32],
         near: f32,
     ) -> Result<Frame, RenderError> {
+        let draw_start = Instant::now();
         let device = &self.gpu.device;
         let queue = &self.gpu.queue;
         let (w, h) = (camera.width, camera.height);
@@ -955,7 +957,6 @@ impl Renderer {
             drop(patches);
         }
         stats.load_ms = load_time.as_secs_f64() * 1e3;
-        let draw_start = Instant::now();
 
         // Outline of hovered parts (post pass into a second colour texture).
         let outline = outputs.color && prepared.any_outline && options.outline_width > 0;
@@ -1064,7 +1065,7 @@ impl Renderer {
             .then(|| add(&targets.depth, 4, wgpu::TextureAspect::DepthOnly));
         let index = queue.submit([encoder.finish()]);
         let data = read_all(device, &reads, index, w, h)?;
-        stats.draw_ms = draw_start.elapsed().as_secs_f64() * 1e3;
+        stats.draw_ms = draw_start.elapsed().saturating_sub(load_time).as_secs_f64() * 1e3;
 
         let n = (w as usize) * (h as usize);
         let ids_words: Option<&Vec<u32>> = ids_read.map(|i| &data[i]);
