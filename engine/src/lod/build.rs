@@ -264,15 +264,12 @@ struct Stored {
     bounds: Sphere,
     cone: [f32; 4],
     outline: PatchOutline,
-    ids: Vec<u32>,
 }
 
 /// A patch of the current level awaiting grouping.
 struct PoolItem {
     node: u32,
     outline: PatchOutline,
-    /// Original IDs of its vertices (to find vertices shared with other patches).
-    ids: Vec<u32>,
 }
 
 struct Builder<'a> {
@@ -406,8 +403,17 @@ impl<'a> Builder<'a> {
             bounds: sphere_of_points(patch.positions.iter()),
             cone: normal_cone(&patch.positions, &patch.indices),
             outline: outline(patch, &border),
-            ids: patch.ids.clone(),
         })
+    }
+
+    /// Original IDs of a stored patch (the head of its scratch record), without the rest.
+    fn load_ids(&self, node: u32) -> io::Result<Vec<u32>> {
+        let n = &self.nodes[node as usize];
+        let bytes = self.raw.read(
+            n.raw_offset + BuildPatch::IDS_OFFSET,
+            n.vertices as usize * 4,
+        )?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
     fn load(&self, node: u32) -> io::Result<BuildPatch> {
@@ -475,9 +481,10 @@ impl<'a> Builder<'a> {
         ingested.positions.release();
         self.progress.stage("partitioning", buckets.len() as u64);
 
-        let positions = ingested.positions.as_slice();
-        let normals = ingested.normals.as_slice();
-        let colors = ingested.colors.as_ref().map(|c| c.as_slice());
+        let arrays = &*ingested;
+        let positions = arrays.positions.as_slice();
+        let normals = arrays.normals.as_slice();
+        let colors = arrays.colors.as_ref().map(|c| c.as_slice());
         let max = self.options.max_patch_triangles;
         let this = &*self;
         let workers = rayon::ThreadPoolBuilder::new()
@@ -495,6 +502,12 @@ impl<'a> Builder<'a> {
                     let _ = std::fs::remove_file(&bucket.path);
                     let mesh = bucket_mesh(&faces, positions, normals, colors);
                     drop(faces);
+                    // Spilled vertex arrays give back the pages this bucket touched.
+                    arrays.positions.release();
+                    arrays.normals.release();
+                    if let Some(c) = &arrays.colors {
+                        c.release();
+                    }
                     let patches = split(&mesh, &mesh.indices, max);
                     let stored = patches
                         .iter()
@@ -512,7 +525,6 @@ impl<'a> Builder<'a> {
                 pool.push(PoolItem {
                     node,
                     outline: s.outline,
-                    ids: s.ids,
                 });
             }
         }
@@ -535,7 +547,7 @@ impl<'a> Builder<'a> {
             round += 1;
             uses.fill(0);
             for item in &pool {
-                for &id in &item.ids {
+                for id in self.load_ids(item.node)? {
                     let u = &mut uses[id as usize];
                     *u = u.saturating_add(1);
                 }
@@ -649,7 +661,6 @@ impl<'a> Builder<'a> {
                             next.push(PoolItem {
                                 node,
                                 outline: s.outline,
-                                ids: s.ids,
                             });
                         }
                         self.groups.push(Group {

@@ -43,7 +43,12 @@ pub struct Ingest {
     rng: u64,
     edge_sum: f64,
     edge_count: u64,
+    /// Triangles since the spilled arrays last gave their pages back.
+    since_release: u64,
 }
+
+/// Spilled arrays hand their resident pages back after this many triangles.
+const RELEASE_EVERY: u64 = 1 << 21;
 
 impl Ingest {
     /// Arrays stay in memory up to `memory_limit` bytes each, then spill into `dir`.
@@ -65,6 +70,7 @@ impl Ingest {
             rng: 0x9E37_79B9_7F4A_7C15,
             edge_sum: 0.0,
             edge_count: 0,
+            since_release: 0,
         })
     }
 
@@ -209,6 +215,15 @@ impl MeshSink for Ingest {
             .write_all(bytemuck::cast_slice(triangles))
             .map_err(io_error)?;
         self.triangle_count += triangles.len() as u64;
+        self.since_release += triangles.len() as u64;
+        if self.since_release >= RELEASE_EVERY {
+            self.since_release = 0;
+            self.positions.release();
+            self.normals.release();
+            if let Some(c) = &self.colors {
+                c.release();
+            }
+        }
         Ok(())
     }
 }

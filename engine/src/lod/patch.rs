@@ -64,6 +64,9 @@ impl BuildPatch {
         border
     }
 
+    /// Byte offset of the original IDs in the scratch record.
+    pub const IDS_OFFSET: u64 = 16;
+
     /// Serialises to the scratch format (native layout; never leaves the build machine).
     pub fn to_bytes(&self) -> Vec<u8> {
         let n = self.ids.len();

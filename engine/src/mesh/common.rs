@@ -95,8 +95,15 @@ pub(crate) struct Emitter<'a> {
     nrm: Vec<[f32; 3]>,
     tris: Vec<[u32; 3]>,
     reported: u64,
+    /// Memory-mapped input whose consumed prefix is released as reading advances, so a
+    /// multi-GB input never counts against the process's resident memory all at once.
+    map: Option<std::sync::Arc<memmap2::Mmap>>,
+    released: u64,
     pub stats: ImportStats,
 }
+
+/// Consumed input is handed back to the kernel in steps of this many bytes.
+const RELEASE_STEP: u64 = 32 << 20;
 
 impl<'a> Emitter<'a> {
     /// Starts the progress stage `stage` measured in `total` units (bytes of input).
@@ -119,8 +126,15 @@ impl<'a> Emitter<'a> {
             nrm: Vec::new(),
             tris: Vec::new(),
             reported: 0,
+            map: None,
+            released: 0,
             stats: ImportStats::default(),
         }
+    }
+
+    /// Releases the pages of `map` that [`Emitter::tick`] reports as consumed.
+    pub fn release_consumed(&mut self, map: std::sync::Arc<memmap2::Mmap>) {
+        self.map = Some(map);
     }
 
     pub fn begin(&mut self, info: &SourceInfo) -> Result<(), ImportError> {
@@ -240,6 +254,24 @@ impl<'a> Emitter<'a> {
         if done > self.reported {
             self.progress.advance(done - self.reported);
             self.reported = done;
+        }
+        if let Some(map) = self.map.as_ref()
+            && done >= self.released + RELEASE_STEP
+        {
+            let page = 4096u64;
+            let end = (done / page * page).min(map.len() as u64);
+            if end > self.released {
+                // SAFETY: a read-only file mapping: dropped pages are read back from the file
+                // (page cache) if touched again, so no data is lost and nothing aliases.
+                let _ = unsafe {
+                    map.unchecked_advise_range(
+                        memmap2::UncheckedAdvice::DontNeed,
+                        self.released as usize,
+                        (end - self.released) as usize,
+                    )
+                };
+                self.released = end;
+            }
         }
         if self.progress.cancelled() {
             return Err(err(self.path, Location::File, ImportErrorKind::Cancelled));

@@ -51,7 +51,7 @@ pub(crate) fn read(
             drop(lines);
             let file =
                 File::open(path).map_err(|e| err(path, Location::File, K::Io(e.to_string())))?;
-            let data = map(path, &file)?;
+            let data = std::sync::Arc::new(map(path, &file)?);
             if (data.len() as u64) != len {
                 return Err(err(
                     path,
@@ -66,6 +66,7 @@ pub(crate) fn read(
                 data: &data,
                 big: big_endian,
             };
+            em.release_consumed(data.clone());
             r.read(&mut em)?;
         }
     }
