@@ -266,6 +266,10 @@ struct Stored {
     outline: PatchOutline,
 }
 
+/// What a group step returns: the group error and its stored products, or `None` when the
+/// group could not be simplified (its members move on unchanged).
+type GroupOutcome = Option<(f32, Vec<Stored>)>;
+
 /// A patch of the current level awaiting grouping.
 struct PoolItem {
     node: u32,
@@ -572,7 +576,7 @@ impl<'a> Builder<'a> {
             let this = &*self;
             let pool_ref = &pool;
             let uses = &uses;
-            let results: Vec<Result<Option<(f32, Vec<Stored>)>, BuildError>> = grouping
+            let results: Vec<Result<GroupOutcome, BuildError>> = grouping
                 .par_iter()
                 .map(|members| {
                     if this.progress.cancelled() {
@@ -873,7 +877,7 @@ fn choose_grid(ingested: &Ingested) -> Grid {
         extent / 65536.0
     };
     step = step.clamp(extent / (1u64 << 24) as f64, extent / (1u64 << 11) as f64);
-    if !(step > 0.0 && step.is_finite()) {
+    if step.is_nan() || step <= 0.0 || step.is_infinite() {
         step = 1e-6;
     }
     Grid {

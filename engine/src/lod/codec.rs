@@ -36,7 +36,7 @@ pub const COLOR_BITS: i32 = 6;
 /// language).
 pub fn oct_encode(n: [f64; 3]) -> [i64; 2] {
     let l1 = n[0].abs() + n[1].abs() + n[2].abs();
-    if !(l1 > 0.0) {
+    if l1.is_nan() || l1 <= 0.0 {
         return [0, 0];
     }
     let (mut x, mut y) = (n[0] / l1, n[1] / l1);
@@ -654,6 +654,7 @@ pub fn computed_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]
 mod tests {
     use super::*;
 
+    #[allow(clippy::type_complexity)]
     fn sheet() -> (
         Grid,
         Vec<[u32; 3]>,
@@ -766,8 +767,8 @@ mod tests {
         let border = border_vertices(&p.indices, p.positions.len());
         for (i, id) in p.original_ids.iter().enumerate() {
             let old = ids.iter().position(|x| x == id).expect("id kept");
-            for k in 0..3 {
-                let d = (p.grid_positions[i][k] as i64 - gp[old][k] as i64).abs();
+            for (k, &expected) in gp[old].iter().enumerate() {
+                let d = (p.grid_positions[i][k] as i64 - expected as i64).abs();
                 if border[i] {
                     assert_eq!(d, 0);
                 } else {

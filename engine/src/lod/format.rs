@@ -180,9 +180,9 @@ impl LodFile {
         {
             return Err(FormatError::Corrupt("table checksum mismatch".into()));
         }
-        if header.nodes_offset % 8 != 0
-            || header.groups_offset % 8 != 0
-            || header.links_offset % 4 != 0
+        if !header.nodes_offset.is_multiple_of(8)
+            || !header.groups_offset.is_multiple_of(8)
+            || !header.links_offset.is_multiple_of(4)
         {
             return Err(FormatError::Corrupt("misaligned table".into()));
         }

@@ -41,7 +41,7 @@ impl<'a> TriangleGrid<'a> {
         let extent = (hi - lo).max(Vec3::splat(1e-12));
         let mut cell = (1.4 * (area / tri_count.max(1) as f64).sqrt()) as f32;
         let max_cells = (tri_count * 16).max(64) as f32;
-        if !(cell > 0.0) {
+        if cell.is_nan() || cell <= 0.0 {
             cell = extent.max_element() / 8.0;
         }
         while (extent.x / cell + 1.0) * (extent.y / cell + 1.0) * (extent.z / cell + 1.0)
