@@ -5,6 +5,12 @@ COPY . .
 RUN cargo build --release -p meshwiki \
  && install -m 0755 target/release/meshwiki /usr/local/bin/meshwiki
 
+# The 3D viewer's front-end packages, as pinned by static/package-lock.json.
+FROM node:20-bookworm-slim AS web
+WORKDIR /web
+COPY static/package.json static/package-lock.json ./
+RUN npm ci --omit=dev --no-audit --no-fund
+
 FROM debian:bookworm-slim
 RUN apt-get update \
  && apt-get install -y --no-install-recommends ca-certificates \
@@ -12,9 +18,11 @@ RUN apt-get update \
  && useradd --system --home-dir /data --shell /usr/sbin/nologin meshwiki \
  && mkdir -p /data && chown meshwiki:meshwiki /data
 COPY --from=build /usr/local/bin/meshwiki /usr/local/bin/meshwiki
+COPY --from=web /web/node_modules /usr/share/meshwiki/node_modules
 USER meshwiki
 ENV MESHWIKI_DATA_DIR=/data \
-    MESHWIKI_BIND=0.0.0.0:8080
+    MESHWIKI_BIND=0.0.0.0:8080 \
+    MESHWIKI_NODE_MODULES=/usr/share/meshwiki/node_modules
 VOLUME ["/data"]
 EXPOSE 8080
 ENTRYPOINT ["meshwiki"]

@@ -76,6 +76,44 @@ impl Default for BuildSettings {
     }
 }
 
+/// Settings of server-side rendering (`MESHWIKI_RENDER_*`): the GPU adapter, the bounded
+/// worker pool and its memory budgets (see `crate::render`).
+#[derive(Debug, Clone)]
+pub struct RenderSettings {
+    /// `auto` (a GPU when present, else the software adapter), `software`, `hardware`, or
+    /// `none` (rendering off).
+    pub adapter: String,
+    /// Renders running at the same time.
+    pub workers: usize,
+    /// Render requests waiting for a worker; more get 503 with `Retry-After`.
+    pub queue: usize,
+    /// Bytes that renders in flight may hold together (render targets, read-back, responses).
+    pub memory_bytes: u64,
+    /// Budget of the shared patch cache (resident bytes).
+    pub cache_bytes: u64,
+    /// Largest image, in pixels.
+    pub max_pixels: u64,
+    /// Largest image side, in pixels.
+    pub max_side: u32,
+    /// Longest wait of a queued request before it gets 503, in seconds.
+    pub queue_wait_secs: u64,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            adapter: "auto".into(),
+            workers: 2,
+            queue: 8,
+            memory_bytes: 768 << 20,
+            cache_bytes: 256 << 20,
+            max_pixels: 2048 * 2048,
+            max_side: 4096,
+            queue_wait_secs: 30,
+        }
+    }
+}
+
 /// Server settings, built by the CLI from flags and `MESHWIKI_*` environment variables.
 #[derive(Debug, Clone)]
 pub struct Settings {
@@ -91,6 +129,8 @@ pub struct Settings {
     pub limits: Limits,
     /// Background builds.
     pub build: BuildSettings,
+    /// Server-side rendering.
+    pub render: RenderSettings,
 }
 
 impl Settings {
@@ -103,6 +143,7 @@ impl Settings {
             workers: 0,
             limits: Limits::default(),
             build: BuildSettings::default(),
+            render: RenderSettings::default(),
         }
     }
 

@@ -7,6 +7,7 @@
 pub mod blobs;
 pub mod config;
 pub mod jobs;
+pub mod render;
 pub mod search;
 pub mod seed;
 pub mod store;

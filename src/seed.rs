@@ -219,8 +219,8 @@ fn sun_disk(lod_path: &Path) -> Result<(Vec<u32>, [f64; 3]), SeedError> {
         for (q, &id) in p.positions.iter().zip(&p.original_ids) {
             if (q[0] as f64 - cx).powi(2) + (q[1] as f64 - cy).powi(2) <= r * r {
                 ids.push(id);
-                for k in 0..3 {
-                    sum[k] += q[k] as f64;
+                for (acc, &c) in sum.iter_mut().zip(q) {
+                    *acc += c as f64;
                 }
             }
         }
@@ -263,6 +263,7 @@ pub async fn seed_demo_model(
                 target: center,
                 up: [0.0, 1.0, 0.0],
                 fovy: 40.0,
+                auto: false,
             }),
             vertex_ids: Some(ids),
             thumbnail_attachment_id: None,

@@ -129,11 +129,10 @@ fn bench(args: &Args) -> anyhow::Result<()> {
     let _scratch = Scratch(dir.clone());
     let input = match args.file.strip_prefix("synth:") {
         Some(n) => {
-            let n: u64 = n
-                .trim()
-                .replace('_', "")
-                .parse()
-                .with_context(|| format!("synth:N needs a triangle count, got {:?}", args.file))?;
+            let n: u64 =
+                n.trim().replace('_', "").parse().with_context(|| {
+                    format!("synth:N needs a triangle count, got {:?}", args.file)
+                })?;
             let path = dir.join("relief.ply");
             let t = std::time::Instant::now();
             let (v, tris) = write_relief_ply(&path, n).context("cannot write the relief")?;

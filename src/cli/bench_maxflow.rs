@@ -4,8 +4,7 @@
 //! entry points: the grid graph (`grid` rows) and the general graph built from an edge list
 //! (`graph` rows; making the edge list is not timed).
 //!
-//! Depends only on std, `anyhow` and the engine, so the engine's `bench_maxflow` example can
-//! run the same code.
+//! Depends only on std, `anyhow` and the engine.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

@@ -5,9 +5,8 @@
 //!
 //! `MODEL` is a `.mwlod` file, a mesh file (its LOD is built into a temporary directory first),
 //! or `synth:N` for the generated relief of about N triangles (e.g. `synth:10000000`).
-//! With `out_dir`, the first, middle and last frames are written there as PNG, with a JSON
-//! summary. `MESHWIKI_RENDER_CACHE_MB` sets the patch cache budget (default 512). Depends only on std, `anyhow` and the engine, so the engine's `bench_render`
-//! example can run the same code.
+//! With `--out DIR`, the first, middle and last frames are written there as PNG, with a JSON
+//! summary. `MESHWIKI_RENDER_CACHE` sets the patch cache budget (e.g. `256M`; default 512M).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -176,11 +175,11 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let mut settings = RendererOptions::default();
-    if let Some(mb) = std::env::var("MESHWIKI_RENDER_CACHE_MB")
-        .ok()
-        .and_then(|v| v.parse::<u64>().ok())
-    {
-        settings.cache_bytes = mb.max(1) << 20;
+    if let Ok(v) = std::env::var("MESHWIKI_RENDER_CACHE") {
+        settings.cache_bytes = meshwiki::jobs::parse_size(&v)
+            .map_err(anyhow::Error::msg)
+            .context("MESHWIKI_RENDER_CACHE")?
+            .max(1 << 20);
     }
     let renderer = Renderer::open(AdapterChoice::Software, settings)
         .context("opening the software adapter")?;

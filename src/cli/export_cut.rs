@@ -135,9 +135,13 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.clone();
     let (max_error, pixel_error, no_culling) = (args.max_error, args.pixel_error, args.no_culling);
     let summary = tokio::task::spawn_blocking(move || -> anyhow::Result<String> {
-        let lod = LodFile::open(&path).with_context(|| format!("cannot open {}", path.display()))?;
+        let lod =
+            LodFile::open(&path).with_context(|| format!("cannot open {}", path.display()))?;
         let (nodes, what) = match (max_error, camera) {
-            (Some(e), _) => (cut_uniform(lod.nodes(), e), format!("uniform cut at error {e}")),
+            (Some(e), _) => (
+                cut_uniform(lod.nodes(), e),
+                format!("uniform cut at error {e}"),
+            ),
             (None, Some(cam)) => {
                 let culling = if no_culling {
                     Culling::NONE

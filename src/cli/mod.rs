@@ -6,6 +6,7 @@ pub mod bench_build;
 pub mod bench_maxflow;
 pub mod bench_render;
 pub mod bench_search;
+pub mod bench_select;
 pub mod demo;
 pub mod export_cut;
 pub mod import;
@@ -73,13 +74,18 @@ pub enum BenchCommand {
         /// Directory of the instances or their archive (default `../shared/data/maxflow`).
         dir: Option<PathBuf>,
     },
-    /// Server-side rendering of a camera path (`.mwlod`, a scan, or `synth:N`).
+    /// Server-side rendering of a camera path at 1280x720 and 1 px on the software adapter
+    /// (`.mwlod`, a scan, or `synth:N`): frame time p50/p95, triangles, patches, memory.
     Render {
-        /// The model: a `.mwlod` file, a scan file or `synth:N`.
+        /// The model: a `.mwlod` file, a scan file or `synth:N` (e.g. `synth:10000000`).
         model: PathBuf,
         /// Write a few frames and a JSON summary here.
+        #[arg(long = "out", value_name = "DIR")]
         out_dir: Option<PathBuf>,
     },
+    /// The selection tools (heavy lasso, markup, lasso) through the real server against the
+    /// Princeton segmentation benchmark: error vs ground truth and latency per tool.
+    Select(bench_select::Args),
 }
 
 /// The data directory.
@@ -126,6 +132,54 @@ pub struct ServerArgs {
     /// Threads of one LOD build (0: all cores).
     #[arg(long, env = "MESHWIKI_BUILD_THREADS", default_value_t = 0)]
     pub build_threads: usize,
+    /// Server-side rendering.
+    #[command(flatten)]
+    pub render: RenderArgs,
+}
+
+/// Options of server-side rendering (render API, thumbnails, best views).
+#[derive(Debug, Clone, Args)]
+pub struct RenderArgs {
+    /// GPU adapter: auto (a GPU, else the software adapter), software, hardware or none.
+    #[arg(long, env = "MESHWIKI_RENDER_ADAPTER", default_value = "auto")]
+    pub render_adapter: String,
+    /// Renders running at the same time.
+    #[arg(long, env = "MESHWIKI_RENDER_WORKERS", default_value_t = 2)]
+    pub render_workers: usize,
+    /// Render requests waiting for a worker; more get 503 with Retry-After.
+    #[arg(long, env = "MESHWIKI_RENDER_QUEUE", default_value_t = 8)]
+    pub render_queue: usize,
+    /// Memory that renders in flight may hold together (e.g. 768M, 1G).
+    #[arg(long, env = "MESHWIKI_RENDER_MEMORY", default_value = "768M", value_parser = meshwiki::jobs::parse_size)]
+    pub render_memory: u64,
+    /// Budget of the shared patch cache (e.g. 256M).
+    #[arg(long, env = "MESHWIKI_RENDER_CACHE", default_value = "256M", value_parser = meshwiki::jobs::parse_size)]
+    pub render_cache: u64,
+    /// Largest rendered image, in pixels.
+    #[arg(long, env = "MESHWIKI_RENDER_MAX_PIXELS", default_value_t = 2048 * 2048)]
+    pub render_max_pixels: u64,
+    /// Largest rendered image side, in pixels.
+    #[arg(long, env = "MESHWIKI_RENDER_MAX_SIDE", default_value_t = 4096)]
+    pub render_max_side: u32,
+    /// Longest wait of a queued render request before it gets 503, in seconds.
+    #[arg(long, env = "MESHWIKI_RENDER_QUEUE_WAIT", default_value_t = 30)]
+    pub render_queue_wait: u64,
+}
+
+impl RenderArgs {
+    /// The render settings of these options.
+    pub fn settings(&self) -> meshwiki::config::RenderSettings {
+        meshwiki::config::RenderSettings {
+            adapter: self.render_adapter.clone(),
+            workers: self.render_workers.clamp(1, 64),
+            queue: self.render_queue.min(10_000),
+            memory_bytes: self.render_memory.max(16 << 20),
+            cache_bytes: self.render_cache.max(1 << 20),
+            max_pixels: self.render_max_pixels.clamp(1, 8192 * 8192),
+            max_side: self.render_max_side.clamp(16, 8192),
+            queue_wait_secs: self.render_queue_wait.clamp(1, 3600),
+        }
+    }
 }
 
 impl ServerArgs {
@@ -142,6 +196,7 @@ impl ServerArgs {
         s.build.workers = self.build_workers.clamp(1, 64);
         s.build.memory_budget = self.build_memory.max(64 << 20);
         s.build.threads = (self.build_threads > 0).then_some(self.build_threads);
+        s.render = self.render.settings();
         s
     }
 }
@@ -163,6 +218,9 @@ pub async fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Render { model, out_dir }) => {
             tokio::task::spawn_blocking(move || bench_render::run(&model, out_dir.as_deref()))
                 .await?
+        }
+        Command::Bench(BenchCommand::Select(args)) => {
+            tokio::task::spawn_blocking(move || bench_select::run(args)).await?
         }
         Command::Lod(command) => lod::run(command),
     }

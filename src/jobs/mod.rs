@@ -154,12 +154,24 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// Whether process `pid` is alive (Linux: `/proc/<pid>`; elsewhere only this process).
+/// Whether process `pid` is a live meshwiki process: this one, or (Linux) one whose
+/// `/proc/<pid>/comm` is this program's name (so a recycled pid is not taken for a build).
+/// Elsewhere only this process counts.
 pub fn process_alive(pid: i64) -> bool {
     if pid == std::process::id() as i64 {
         return true;
     }
-    cfg!(target_os = "linux") && pid > 0 && Path::new("/proc").join(pid.to_string()).exists()
+    if !cfg!(target_os = "linux") || pid <= 0 {
+        return false;
+    }
+    let comm = |p: &Path| std::fs::read_to_string(p.join("comm")).ok();
+    match (
+        comm(&Path::new("/proc").join(pid.to_string())),
+        comm(Path::new("/proc/self")),
+    ) {
+        (Some(other), Some(me)) => other == me,
+        _ => false,
+    }
 }
 
 /// Parses a byte size: `1073741824`, `512M`, `1G`, `1.5GiB`, `800MB` (binary units).
@@ -289,9 +301,9 @@ impl MeshSink for InputSink<'_> {
 
     fn vertices(&mut self, batch: VertexBatch<'_>) -> Result<(), ImportError> {
         for p in batch.positions {
-            for k in 0..3 {
-                self.lo[k] = self.lo[k].min(p[k]);
-                self.hi[k] = self.hi[k].max(p[k]);
+            for (k, &c) in p.iter().enumerate() {
+                self.lo[k] = self.lo[k].min(c);
+                self.hi[k] = self.hi[k].max(c);
             }
         }
         self.sink.vertices(batch)
@@ -462,7 +474,12 @@ impl Jobs {
         };
         match jobs::create_with_model(&self.inner.db, model, &new, user_id).await {
             Ok((model, job)) => {
-                tracing::info!(job = job.id, model = model.id, bytes = scan.bytes, "upload queued");
+                tracing::info!(
+                    job = job.id,
+                    model = model.id,
+                    bytes = scan.bytes,
+                    "upload queued"
+                );
                 self.emit(&job);
                 self.wake();
                 Ok((model, job))
@@ -485,10 +502,7 @@ impl Jobs {
         let new = NewJob {
             kind: JobKind::Demo,
             source_path: None,
-            source_name: format!(
-                "generated relief ({} triangles)",
-                relief.triangle_count()
-            ),
+            source_name: format!("generated relief ({} triangles)", relief.triangle_count()),
             source_bytes: 0,
             options: JobOptions {
                 triangles: Some(triangles),
@@ -523,7 +537,11 @@ impl Jobs {
     }
 
     /// Cancels every active job of a model (before the model is deleted).
-    pub async fn cancel_for_model(&self, model_id: i64, user_id: Option<i64>) -> Result<(), JobError> {
+    pub async fn cancel_for_model(
+        &self,
+        model_id: i64,
+        user_id: Option<i64>,
+    ) -> Result<(), JobError> {
         for job in jobs::active_for_model(&self.inner.db, model_id).await? {
             self.cancel(job.id, user_id).await?;
         }
@@ -533,8 +551,10 @@ impl Jobs {
     fn build_options(&self, job: &Job) -> BuildOptions {
         let b = &self.inner.settings.build;
         BuildOptions {
-            max_patch_triangles: job.options.max_patch_triangles.unwrap_or(b.max_patch_triangles)
-                as usize,
+            max_patch_triangles: job
+                .options
+                .max_patch_triangles
+                .unwrap_or(b.max_patch_triangles) as usize,
             memory_budget: job
                 .options
                 .memory_budget
@@ -710,7 +730,9 @@ impl Jobs {
             thumbnail_attachment_id: thumbnail,
             report: serde_json::to_value(&report).unwrap_or_default(),
         };
-        if !jobs::finish_done(db, job.id, model_id, &built).await? {
+        // The demo model is seeded before its job ends, so "done" means everything is there.
+        let seed = job.kind == JobKind::Demo && job.created_by.is_some();
+        if !jobs::finish_done(db, job.id, model_id, &built, !seed).await? {
             let _ = tokio::fs::remove_file(&output).await;
             jobs::finish_failed(db, job.id, JobStatus::Cancelled, "the model was deleted").await?;
             self.remove_source(job).await;
@@ -725,9 +747,7 @@ impl Jobs {
             seconds = report.seconds,
             "build done"
         );
-        if job.kind == JobKind::Demo
-            && let Some(user) = job.created_by
-        {
+        if seed && let Some(user) = job.created_by {
             let lod = output.clone();
             match crate::seed::seed_demo_model(db, &self.inner.settings, model_id, &lod, user).await
             {
@@ -742,6 +762,7 @@ impl Jobs {
                 Ok(false) => {}
                 Err(e) => tracing::warn!(error = %e, "cannot seed the demo model"),
             }
+            jobs::mark_done(db, job.id, &built.report).await?;
         }
         Ok(JobEnd::Done(Box::new(report)))
     }
@@ -768,7 +789,8 @@ impl Jobs {
         let path = lod_path.to_path_buf();
         let stored = tokio::task::spawn_blocking(move || -> Result<(String, usize), String> {
             let lod = LodFile::open(&path).map_err(|e| e.to_string())?;
-            let png = thumbnail::render_png(Arc::new(lod)).map_err(|e| e.to_string())?;
+            let png = thumbnail::render_png(&settings.render, Arc::new(lod))
+                .map_err(|e| e.to_string())?;
             let sha = crate::blobs::write_bytes(&settings, &png).map_err(|e| e.to_string())?;
             Ok((sha, png.len()))
         })
@@ -806,11 +828,9 @@ impl Jobs {
         let settings = self.inner.settings.clone();
         let lods = jobs::model_lod_paths(&self.inner.db).await?;
         let sources = jobs::pending_sources(&self.inner.db).await?;
-        let removed = tokio::task::spawn_blocking(move || {
-            cleanup_dirs(&settings, &lods, &sources)
-        })
-        .await
-        .map_err(|e| JobError::Invalid(e.to_string()))??;
+        let removed = tokio::task::spawn_blocking(move || cleanup_dirs(&settings, &lods, &sources))
+            .await
+            .map_err(|e| JobError::Invalid(e.to_string()))??;
         for p in removed {
             tracing::info!(path = %p.display(), "removed leftover of an interrupted build");
         }

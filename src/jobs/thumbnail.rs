@@ -1,18 +1,21 @@
-//! Model thumbnails, rendered once a build ends: the engine's headless renderer draws the
-//! 1-pixel cut from the model's mean facing direction (`MESHWIKI_RENDER_ADAPTER`: `auto`,
-//! `software` or `hardware`). Where no GPU adapter opens (not even Mesa's lavapipe), a small
-//! CPU rasteriser draws a coarse uniform cut instead, so every model still gets a picture.
+//! Model thumbnails, rendered once a build ends: the process's render service
+//! ([`crate::render::RenderService`], `MESHWIKI_RENDER_ADAPTER`) draws the 1-pixel cut from
+//! the model's mean facing direction through [`crate::render::thumbnail_png`], the code path
+//! of part thumbnails too, as background work of the render pool. Where no GPU adapter opens
+//! (not even Mesa's lavapipe), a small CPU rasteriser draws a coarse uniform cut instead, so
+//! every model still gets a picture.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{LodFile, NO_GROUP, cut_uniform};
+use meshwiki_engine::render::Model;
 use meshwiki_engine::render::best_view::{BestViewOptions, framing_camera};
 use meshwiki_engine::render::encode::{self, ImageFormat};
-use meshwiki_engine::render::{
-    AdapterChoice, Cut, Model, Outputs, RenderOptions, Renderer, RendererOptions,
-};
+
+use crate::config::RenderSettings;
+use crate::render::{RenderService, RenderServiceError};
 
 /// Thumbnail width in pixels.
 pub const WIDTH: u32 = 320;
@@ -30,33 +33,6 @@ pub enum ThumbnailError {
     /// Encoding failed.
     #[error("cannot encode thumbnail: {0}")]
     Encode(#[from] encode::EncodeError),
-}
-
-fn renderer() -> Option<&'static Renderer> {
-    static RENDERER: OnceLock<Option<Renderer>> = OnceLock::new();
-    RENDERER
-        .get_or_init(|| {
-            let choice = std::env::var("MESHWIKI_RENDER_ADAPTER")
-                .ok()
-                .and_then(|s| AdapterChoice::parse(&s))
-                .unwrap_or_default();
-            let options = RendererOptions {
-                cache_bytes: 64 << 20,
-                batch_bytes: 32 << 20,
-                ..RendererOptions::default()
-            };
-            match Renderer::open(choice, options) {
-                Ok(r) => {
-                    tracing::info!(adapter = %r.device().info.name, "thumbnail renderer ready");
-                    Some(r)
-                }
-                Err(e) => {
-                    tracing::warn!(error = %e, "no GPU adapter: thumbnails use the CPU fallback");
-                    None
-                }
-            }
-        })
-        .as_ref()
 }
 
 /// The camera of a thumbnail: the model's mean facing direction (roots' normal cones
@@ -97,26 +73,24 @@ pub fn camera(lod: &LodFile) -> Camera {
 }
 
 /// Renders the thumbnail of `lod` as PNG.
-pub fn render_png(lod: Arc<LodFile>) -> Result<Vec<u8>, ThumbnailError> {
+pub fn render_png(settings: &RenderSettings, lod: Arc<LodFile>) -> Result<Vec<u8>, ThumbnailError> {
     let cam = camera(&lod);
-    let pixels = match renderer() {
-        Some(r) => {
-            let model = Model::new(lod);
-            let options = RenderOptions {
-                cut: Cut::default(),
-                outputs: Outputs::IMAGE,
-                ..RenderOptions::default()
-            };
-            let frame = r
-                .render(&model, &cam, &options, &[])
-                .map_err(|e| ThumbnailError::Render(e.to_string()));
+    let service = RenderService::shared(settings);
+    if service.available() {
+        let model = Model::new(lod.clone());
+        let bytes = crate::render::thumbnail_bytes(WIDTH, HEIGHT);
+        let png = service.run_blocking(bytes, |r| {
+            let png = crate::render::thumbnail_png(r, &model, &cam, &[]);
             r.forget(&model);
-            frame?
-                .color
-                .ok_or_else(|| ThumbnailError::Render("no colour buffer".into()))?
+            png
+        });
+        match png {
+            Ok(Ok(png)) => return Ok(png),
+            Ok(Err(RenderServiceError::Encode(e))) => return Err(e.into()),
+            Ok(Err(e)) | Err(e) => return Err(ThumbnailError::Render(e.to_string())),
         }
-        None => rasterize(&lod, &cam)?,
-    };
+    }
+    let pixels = rasterize(&lod, &cam)?;
     Ok(encode::encode(
         &pixels,
         WIDTH,
@@ -185,9 +159,7 @@ fn rasterize(lod: &LodFile, cam: &Camera) -> Result<Vec<[u8; 4]>, ThumbnailError
                 [209.0, 204.0, 194.0]
             } else {
                 let c = ix.map(|i| p.colors[i]);
-                std::array::from_fn(|k| {
-                    (c[0][k] as f32 + c[1][k] as f32 + c[2][k] as f32) / 3.0
-                })
+                std::array::from_fn(|k| (c[0][k] as f32 + c[1][k] as f32 + c[2][k] as f32) / 3.0)
             };
             let rgba = [
                 (base[0] * shade) as u8,
@@ -214,9 +186,17 @@ fn fill(
         return;
     }
     let min_x = v.iter().map(|p| p.0).fold(f32::INFINITY, f32::min).max(0.0) as usize;
-    let max_x = v.iter().map(|p| p.0).fold(f32::NEG_INFINITY, f32::max).min(w as f32 - 1.0);
+    let max_x = v
+        .iter()
+        .map(|p| p.0)
+        .fold(f32::NEG_INFINITY, f32::max)
+        .min(w as f32 - 1.0);
     let min_y = v.iter().map(|p| p.1).fold(f32::INFINITY, f32::min).max(0.0) as usize;
-    let max_y = v.iter().map(|p| p.1).fold(f32::NEG_INFINITY, f32::max).min(h as f32 - 1.0);
+    let max_y = v
+        .iter()
+        .map(|p| p.1)
+        .fold(f32::NEG_INFINITY, f32::max)
+        .min(h as f32 - 1.0);
     if max_x < 0.0 || max_y < 0.0 {
         return;
     }

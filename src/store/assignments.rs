@@ -44,6 +44,20 @@ pub struct AssignedPart {
     pub kind: String,
     /// Position of the content in the part's list.
     pub position: i64,
+    /// Part thumbnail (rendered by the server).
+    pub thumbnail_attachment_id: Option<i64>,
+    /// The part's camera as stored (JSON); see [`AssignedPart::camera`].
+    #[serde(skip)]
+    pub camera_json: Option<String>,
+}
+
+impl AssignedPart {
+    /// The part's camera (its best view unless a client set one).
+    pub fn camera(&self) -> Option<super::parts::Camera> {
+        self.camera_json
+            .as_deref()
+            .and_then(|c| serde_json::from_str(c).ok())
+    }
 }
 
 async fn ensure_part(tx: &mut Tx, part_id: i64) -> Result<()> {
@@ -77,7 +91,8 @@ pub async fn contents_for_part(db: &Db, part_id: i64) -> Result<Vec<AssignedCont
 /// Parts a content is assigned to.
 pub async fn parts_for_content(db: &Db, content_id: i64) -> Result<Vec<AssignedPart>> {
     Ok(sqlx::query_as::<_, AssignedPart>(
-        "SELECT p.id, a.id AS assignment_id, p.model_id, m.title AS model_title, p.kind, a.position
+        "SELECT p.id, a.id AS assignment_id, p.model_id, m.title AS model_title, p.kind, a.position,
+         p.thumbnail_attachment_id, p.camera AS camera_json
          FROM assignments a JOIN parts p ON p.id = a.part_id JOIN models m ON m.id = p.model_id
          WHERE a.content_id = ? ORDER BY m.id, p.id",
     )

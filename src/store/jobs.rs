@@ -485,9 +485,16 @@ pub struct BuiltModel {
     pub report: serde_json::Value,
 }
 
-/// Ends job `id` as done and makes its model ready with `built`, in one transaction.
+/// Makes the model of job `id` ready with `built` and, with `end_job`, ends the job as done,
+/// in one transaction (without `end_job`, [`mark_done`] ends it after follow-up work).
 /// Returns `false` (and changes nothing) when the model no longer exists.
-pub async fn finish_done(db: &Db, id: i64, model_id: i64, built: &BuiltModel) -> Result<bool> {
+pub async fn finish_done(
+    db: &Db,
+    id: i64,
+    model_id: i64,
+    built: &BuiltModel,
+    end_job: bool,
+) -> Result<bool> {
     let mut tx = db.begin().await?;
     let now = crate::now_rfc3339();
     let b = built.bbox;
@@ -516,16 +523,9 @@ pub async fn finish_done(db: &Db, id: i64, model_id: i64, built: &BuiltModel) ->
     if n == 0 {
         return Ok(false);
     }
-    sqlx::query(
-        "UPDATE jobs SET status = 'done', stage = 'done', percent = 100, message = NULL,
-         report = ?, finished_at = ?, updated_at = ? WHERE id = ?",
-    )
-    .bind(built.report.to_string())
-    .bind(&now)
-    .bind(&now)
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
+    if end_job {
+        done_tx(&mut tx, id, &built.report).await?;
+    }
     super::audit::record(
         &mut tx,
         None,
@@ -544,14 +544,32 @@ pub async fn finish_done(db: &Db, id: i64, model_id: i64, built: &BuiltModel) ->
     Ok(true)
 }
 
+async fn done_tx(tx: &mut Tx, id: i64, report: &serde_json::Value) -> Result<()> {
+    let now = crate::now_rfc3339();
+    sqlx::query(
+        "UPDATE jobs SET status = 'done', stage = 'done', percent = 100, message = NULL,
+         report = ?, finished_at = ?, updated_at = ? WHERE id = ?",
+    )
+    .bind(report.to_string())
+    .bind(&now)
+    .bind(&now)
+    .bind(id)
+    .execute(&mut **tx)
+    .await?;
+    Ok(())
+}
+
+/// Ends job `id` as done (after [`finish_done`] without `end_job`).
+pub async fn mark_done(db: &Db, id: i64, report: &serde_json::Value) -> Result<()> {
+    let mut tx = db.begin().await?;
+    done_tx(&mut tx, id, report).await?;
+    tx.commit().await?;
+    Ok(())
+}
+
 /// Ends job `id` as failed or cancelled with `message`; its model (if any) becomes `failed`
 /// with the same message.
-pub async fn finish_failed(
-    db: &Db,
-    id: i64,
-    status: JobStatus,
-    message: &str,
-) -> Result<()> {
+pub async fn finish_failed(db: &Db, id: i64, status: JobStatus, message: &str) -> Result<()> {
     let mut tx = db.begin().await?;
     let job = get_tx(&mut tx, id).await?;
     let now = crate::now_rfc3339();
@@ -602,8 +620,7 @@ pub async fn requeue(db: &Db, id: i64) -> Result<()> {
 }
 
 /// Message of a `meshwiki import` job whose process died.
-pub const INTERRUPTED_MESSAGE: &str =
-    "import interrupted: the `meshwiki import` process ended before the build finished; \
+pub const INTERRUPTED_MESSAGE: &str = "import interrupted: the `meshwiki import` process ended before the build finished; \
      run the import again";
 
 /// What [`recover`] did.
@@ -615,9 +632,9 @@ pub struct Recovered {
     pub failed: Vec<i64>,
 }
 
-/// After a crash: running jobs of this server (uploads, demo) go back to the queue (their
-/// models `pending`); running `meshwiki import` jobs whose process is gone (`alive` says
-/// which processes live) fail.
+/// After a crash: running jobs whose process is gone (`alive` says which processes live)
+/// are recovered: server jobs (uploads, demo) go back to the queue (their models `pending`),
+/// `meshwiki import` jobs fail. Jobs of live processes are left alone.
 pub async fn recover(db: &Db, alive: impl Fn(i64) -> bool) -> Result<Recovered> {
     let mut tx = db.begin().await?;
     let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
@@ -632,6 +649,9 @@ pub async fn recover(db: &Db, alive: impl Fn(i64) -> bool) -> Result<Recovered> 
     let mut out = Recovered::default();
     let now = crate::now_rfc3339();
     for job in jobs {
+        if job.runner_pid.is_some_and(&alive) {
+            continue;
+        }
         match job.kind {
             JobKind::Upload | JobKind::Demo => {
                 sqlx::query(
@@ -648,9 +668,6 @@ pub async fn recover(db: &Db, alive: impl Fn(i64) -> bool) -> Result<Recovered> 
                 out.requeued.push(job.id);
             }
             JobKind::File => {
-                if job.runner_pid.is_some_and(&alive) {
-                    continue;
-                }
                 sqlx::query(
                     "UPDATE jobs SET status = 'failed', message = ?, finished_at = ?,
                      updated_at = ? WHERE id = ?",

@@ -13,6 +13,7 @@ pub mod changes;
 pub mod contents;
 pub mod jobs;
 pub mod models;
+pub mod part_revisions;
 pub mod parts;
 pub mod sessions;
 pub mod users;
@@ -99,6 +100,11 @@ const MIGRATIONS: &[(i64, &str, &str)] = &[
         include_str!("../../migrations/0001_initial.sql"),
     ),
     (2, "jobs", include_str!("../../migrations/0002_jobs.sql")),
+    (
+        6,
+        "part_revisions",
+        include_str!("../../migrations/0006_part_revisions.sql"),
+    ),
 ];
 
 impl MigrationSource<'static> for Embedded {

@@ -32,6 +32,11 @@ impl PartKind {
 }
 
 /// Preferred view of a part.
+///
+/// A part created without a camera gets its *best view* from the server (`auto: true`,
+/// `crate::render::views`), recomputed whenever its vertex set changes; a camera given by a
+/// client (`auto` is then always false) is kept until a client changes it, and `null` in a
+/// patch hands the part back to the server's best view.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
@@ -43,6 +48,9 @@ pub struct Camera {
     pub up: [f64; 3],
     /// Vertical field of view in degrees.
     pub fovy: f64,
+    /// Computed by the server (best view) rather than given by a client.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub auto: bool,
 }
 
 impl Camera {
@@ -218,7 +226,7 @@ pub async fn create(
     let blob = (!set.is_empty()).then(|| serialize_set(&set));
     let camera = new
         .camera
-        .map(|c| serde_json::to_string(&c).unwrap_or_default());
+        .map(|c| serde_json::to_string(&Camera { auto: false, ..c }).unwrap_or_default());
     let now = crate::now_rfc3339();
     let id: i64 = sqlx::query_scalar(
         "INSERT INTO parts (model_id, kind, center_x, center_y, center_z, vertex_count, vertex_set,
@@ -328,12 +336,20 @@ pub async fn update(
         part.center = c;
     }
     if let Some(c) = patch.camera {
-        part.camera = c;
+        part.camera = c.map(|c| Camera { auto: false, ..c });
     }
     if let Some(t) = patch.thumbnail_attachment_id {
         part.thumbnail_attachment_id = t;
     }
     if let Some(ids) = &patch.vertex_ids {
+        // A new region gets a new best view (unless its camera came from a client) and a new
+        // thumbnail (unless this patch sets one); the server renders them in the background.
+        if patch.camera.is_none() && part.camera.is_some_and(|c| c.auto) {
+            part.camera = None;
+        }
+        if patch.thumbnail_attachment_id.is_none() {
+            part.thumbnail_attachment_id = None;
+        }
         let model_vertices = model_vertices(&mut tx, part.model_id).await?;
         let set = vertex_set(ids, model_vertices, max_vertices)?;
         part.vertex_count = set.len() as i64;
@@ -405,4 +421,73 @@ pub async fn delete(db: &Db, id: i64, user_id: i64) -> Result<()> {
     .await?;
     tx.commit().await?;
     Ok(())
+}
+
+/// Parts that lack a camera or a thumbnail, on ready models (all of them, or those of
+/// `model_id`): the work list of the server's best views and thumbnails.
+pub async fn needing_views(db: &Db, model_id: Option<i64>) -> Result<Vec<i64>> {
+    Ok(sqlx::query_scalar(
+        "SELECT p.id FROM parts p JOIN models m ON m.id = p.model_id
+         WHERE m.status = 'ready' AND (p.camera IS NULL OR p.thumbnail_attachment_id IS NULL)
+         AND (? IS NULL OR p.model_id = ?) ORDER BY p.id",
+    )
+    .bind(model_id)
+    .bind(model_id)
+    .fetch_all(&db.read)
+    .await?)
+}
+
+/// The stored vertex set of a part as it is in the database (`None` when it has none), for
+/// [`set_generated_view`]; `NotFound` for an unknown part.
+pub async fn vertex_set_raw(db: &Db, id: i64) -> Result<Option<Vec<u8>>> {
+    let blob: Option<Option<Vec<u8>>> =
+        sqlx::query_scalar("SELECT vertex_set FROM parts WHERE id = ?")
+            .bind(id)
+            .fetch_optional(&db.read)
+            .await?;
+    blob.ok_or(StoreError::NotFound("part"))
+}
+
+/// Model and vertex-set size in bytes of part `id`, `None` when there is no such part.
+pub async fn model_and_set_size(db: &Db, id: i64) -> Result<Option<(i64, i64)>> {
+    Ok(sqlx::query_as::<_, (i64, i64)>(
+        "SELECT model_id, COALESCE(length(vertex_set), 0) FROM parts WHERE id = ?",
+    )
+    .bind(id)
+    .fetch_optional(&db.read)
+    .await?)
+}
+
+/// Stores a server-computed camera (`auto` is set) and thumbnail where the part has none,
+/// provided its vertex set is still `vertex_set` (else it changed meanwhile and the work is
+/// stale). Returns whether the part was updated. `updated_at` is left alone: it versions
+/// edits (selections check it), and these views are derived from the part, not edits.
+pub async fn set_generated_view(
+    db: &Db,
+    id: i64,
+    camera: Option<&Camera>,
+    thumbnail_attachment_id: Option<i64>,
+    vertex_set: Option<&[u8]>,
+) -> Result<bool> {
+    let camera =
+        camera.map(|c| serde_json::to_string(&Camera { auto: true, ..*c }).unwrap_or_default());
+    let mut tx = db.begin().await?;
+    let n = sqlx::query(
+        "UPDATE parts SET camera = COALESCE(camera, ?),
+         thumbnail_attachment_id = COALESCE(thumbnail_attachment_id, ?)
+         WHERE id = ? AND vertex_set IS ?
+         AND ((camera IS NULL AND ? IS NOT NULL) OR (thumbnail_attachment_id IS NULL AND ? IS NOT NULL))",
+    )
+    .bind(&camera)
+    .bind(thumbnail_attachment_id)
+    .bind(id)
+    .bind(vertex_set)
+    .bind(&camera)
+    .bind(thumbnail_attachment_id)
+    .execute(&mut *tx)
+    .await
+    .map_err(|e| StoreError::map_constraint(e, "", "thumbnail attachment does not exist"))?
+    .rows_affected();
+    tx.commit().await?;
+    Ok(n > 0)
 }

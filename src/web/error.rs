@@ -42,6 +42,14 @@ pub enum ApiError {
     PayloadTooLarge(String),
     /// 415: wrong content type.
     UnsupportedMediaType(String),
+    /// 503: the service cannot answer now (render queue full, no GPU adapter); with
+    /// `Retry-After` when retrying later may work.
+    Unavailable {
+        /// Why.
+        message: String,
+        /// Suggested delay in seconds.
+        retry_after: Option<u64>,
+    },
     /// 500: server fault (details are logged, not shown).
     Internal(String),
 }
@@ -78,7 +86,8 @@ impl ApiError {
             | ApiError::NotFound(m)
             | ApiError::Conflict(m)
             | ApiError::PayloadTooLarge(m)
-            | ApiError::UnsupportedMediaType(m) => m.clone(),
+            | ApiError::UnsupportedMediaType(m)
+            | ApiError::Unavailable { message: m, .. } => m.clone(),
             ApiError::Unauthorized => "authentication required: log in first".into(),
             ApiError::BadCredentials => "invalid username or password".into(),
             ApiError::MethodNotAllowed => "method not allowed on this path".into(),
@@ -109,6 +118,7 @@ impl ResponseError for ApiError {
             ApiError::Conflict(_) | ApiError::StaleRevision { .. } => StatusCode::CONFLICT,
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::Unavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -128,6 +138,13 @@ impl ResponseError for ApiError {
         }
         let mut resp = HttpResponse::build(self.status_code());
         resp.insert_header((header::CACHE_CONTROL, "no-store"));
+        if let ApiError::Unavailable {
+            retry_after: Some(secs),
+            ..
+        } = self
+        {
+            resp.insert_header((header::RETRY_AFTER, secs.to_string()));
+        }
         if matches!(self, ApiError::Unauthorized) {
             resp.insert_header((header::WWW_AUTHENTICATE, "Cookie realm=\"meshwiki\""));
         }

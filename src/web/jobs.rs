@@ -12,6 +12,7 @@
 use std::path::PathBuf;
 
 use actix_multipart::Multipart;
+use actix_web::ResponseError as _;
 use actix_web::http::{StatusCode, header};
 use actix_web::{HttpRequest, HttpResponse, web};
 use askama::Template;
@@ -115,7 +116,9 @@ fn check_title(title: &str, max: usize) -> Result<String, ApiError> {
     let t = title.trim();
     let n = t.chars().count();
     if n == 0 || n > max {
-        return Err(ApiError::bad(format!("title must be 1 to {max} characters")));
+        return Err(ApiError::bad(format!(
+            "title must be 1 to {max} characters"
+        )));
     }
     Ok(t.to_string())
 }
@@ -378,8 +381,6 @@ async fn page_upload(
         .map_err(ApiError::from)?;
     Ok(redirect(&format!("/models/{}", model.id)))
 }
-
-use actix_web::ResponseError as _;
 
 async fn page_cancel(
     state: web::Data<AppState>,

@@ -138,13 +138,11 @@ impl LodRegistry {
                 p.components().count() >= 2
                     && p.components().all(|c| matches!(c, Component::Normal(_)))
             })
-            .ok_or_else(|| {
-                ApiError::Conflict(format!("model {model_id} has no LOD file"))
-            })?;
+            .ok_or_else(|| ApiError::Conflict(format!("model {model_id} has no LOD file")))?;
         let path = state.settings.data_dir.join(rel);
-        let meta = tokio::fs::metadata(&path).await.map_err(|e| {
-            ApiError::internal(format!("LOD file {} missing: {e}", path.display()))
-        })?;
+        let meta = tokio::fs::metadata(&path)
+            .await
+            .map_err(|e| ApiError::internal(format!("LOD file {} missing: {e}", path.display())))?;
         let key = FileKey::of(&path, &meta);
         if let Ok(mut m) = self.inner.lock()
             && let Some(e) = m.get_mut(&model_id)
@@ -389,7 +387,9 @@ pub fn parse_range(value: Option<&str>, len: u64) -> Result<Option<ByteRange>, B
         } else {
             let last = num(b).ok_or_else(|| BadRange(format!("malformed byte range {spec:?}")))?;
             if last < start {
-                return Err(BadRange(format!("byte range {spec:?} ends before it starts")));
+                return Err(BadRange(format!(
+                    "byte range {spec:?} ends before it starts"
+                )));
             }
             last.saturating_add(1).min(len)
         };
@@ -569,10 +569,28 @@ mod tests {
     fn ranges() {
         let r = |s: &str| parse_range(Some(s), 100);
         assert_eq!(r("bytes=0-9"), Ok(Some(ByteRange { start: 0, end: 10 })));
-        assert_eq!(r("bytes=90-"), Ok(Some(ByteRange { start: 90, end: 100 })));
-        assert_eq!(r("bytes=-10"), Ok(Some(ByteRange { start: 90, end: 100 })));
+        assert_eq!(
+            r("bytes=90-"),
+            Ok(Some(ByteRange {
+                start: 90,
+                end: 100
+            }))
+        );
+        assert_eq!(
+            r("bytes=-10"),
+            Ok(Some(ByteRange {
+                start: 90,
+                end: 100
+            }))
+        );
         assert_eq!(r("bytes=-1000"), Ok(Some(ByteRange { start: 0, end: 100 })));
-        assert_eq!(r("bytes=50-5000"), Ok(Some(ByteRange { start: 50, end: 100 })));
+        assert_eq!(
+            r("bytes=50-5000"),
+            Ok(Some(ByteRange {
+                start: 50,
+                end: 100
+            }))
+        );
         assert_eq!(parse_range(None, 100), Ok(None));
         assert_eq!(r("items=0-1"), Ok(None));
         for bad in [

@@ -13,7 +13,9 @@ pub mod models;
 pub mod openapi;
 pub mod pages;
 pub mod parts;
+pub mod render;
 pub mod search;
+pub mod selections;
 pub mod session;
 pub mod static_files;
 pub mod users;
@@ -49,6 +51,10 @@ pub struct AppState {
     pub jobs: crate::jobs::Jobs,
     /// Open LOD files of ready models.
     pub lods: lod::LodRegistry,
+    /// Server-side rendering: GPU device, patch cache, bounded worker pool.
+    pub render: crate::render::RenderService,
+    /// Draft region selections of every user (`/api/v1/models/{id}/selections`).
+    pub selections: selections::Drafts,
 }
 
 /// Why the server could not start.
@@ -83,7 +89,22 @@ impl AppState {
         let db = Db::open(&settings.db_path()).await?;
         let search = SearchIndex::open(&settings.index_dir(), &db).await?;
         let settings = Arc::new(settings);
+        // Opening the GPU device blocks for a moment.
+        let render_settings = settings.render.clone();
+        let render = tokio::task::spawn_blocking(move || {
+            crate::render::RenderService::shared(&render_settings)
+        })
+        .await
+        .unwrap_or_else(|e| {
+            tracing::error!(error = %e, "opening the render device crashed");
+            crate::render::RenderService::open(&crate::config::RenderSettings {
+                adapter: "none".into(),
+                ..settings.render.clone()
+            })
+        });
         Ok(AppState {
+            render,
+            selections: selections::Drafts::default(),
             jobs: crate::jobs::Jobs::new(db.clone(), settings.clone(), Some(search.clone())),
             lods: lod::LodRegistry::default(),
             db,
@@ -133,6 +154,8 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     models::configure(cfg);
     lod::configure(cfg);
     parts::configure(cfg);
+    selections::configure(cfg);
+    render::configure(cfg);
     contents::configure(cfg);
     assignments::configure(cfg);
     attachments::configure(cfg);
@@ -234,6 +257,14 @@ pub async fn run(state: AppState, on_bound: impl FnOnce(&[SocketAddr])) -> std::
     // Background builds: crash recovery, then the workers (stopped, and their jobs queued
     // again, when the server stops).
     state.jobs.start().await.map_err(std::io::Error::other)?;
+    // Best views and thumbnails of parts, in the background.
+    let _views = crate::render::views::PartViews::start(
+        state.db.clone(),
+        state.settings.clone(),
+        state.render.clone(),
+        state.events.clone(),
+        &state.jobs,
+    );
     on_bound(&server.addrs());
     let result = server.run().await;
     state.jobs.shutdown().await;

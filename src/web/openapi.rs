@@ -306,6 +306,293 @@ pub fn document() -> Value {
         ],
     );
     add(
+        "/api/v1/models/upload",
+        vec![(
+            "post",
+            op(
+                "jobs",
+                "Upload a scan (the raw request body, streamed to disk) and queue its LOD build: creates a model (status pending) and its job",
+                "admin",
+                vec![
+                    json!({ "name": "title", "in": "query", "required": true, "description": "title of the new model (1-300 characters)", "schema": { "type": "string" } }),
+                    json!({ "name": "filename", "in": "query", "required": true, "description": "the scan's file name: only its extension (.ply, .obj, .gltf, .glb, .stl, .off) is used, to pick the format", "schema": { "type": "string" } }),
+                    query_param("description", "string", "description (Markdown)"),
+                ],
+                Some(
+                    json!({ "required": true, "content": { "application/octet-stream": { "schema": { "type": "string", "format": "binary" } } } }),
+                ),
+                vec![
+                    ok(
+                        "202",
+                        "Queued (Location: the job)",
+                        Some(obj(
+                            &["model", "job"],
+                            json!({"model": r("Model"), "job": r("Job")}),
+                        )),
+                    ),
+                    ok("413", "Larger than --max-model-upload-mb", Some(r("Error"))),
+                ],
+            ),
+        )],
+    );
+    add(
+        "/api/v1/models/{id}/lod",
+        vec![(
+            "get",
+            op(
+                "lod",
+                "The model's LOD hierarchy (docs/FORMAT.md, HTTP): JSON, or with format=binary the file's header and tables as application/octet-stream. ETag; If-None-Match gives 304",
+                "viewer",
+                vec![
+                    model_id(),
+                    query_param("format", "string", "json (default) or binary"),
+                ],
+                None,
+                vec![
+                    ok("200", "The hierarchy", Some(r("LodHierarchy"))),
+                    ok("304", "Not modified", None),
+                    ok(
+                        "409",
+                        "The model is not ready (pending, building or failed)",
+                        Some(r("Error")),
+                    ),
+                ],
+            ),
+        )],
+    );
+    add(
+        "/api/v1/models/{id}/lod/patches/{node}",
+        vec![(
+            "get",
+            op(
+                "lod",
+                "One patch blob (docs/FORMAT.md, Patch blob): ETag = its CRC-32, Cache-Control public, max-age=31536000, immutable; If-None-Match (304); one byte range (206, 416 for a bad or multiple range)",
+                "viewer",
+                vec![
+                    model_id(),
+                    json!({ "name": "node", "in": "path", "required": true, "description": "node id", "schema": { "type": "integer", "minimum": 0 } }),
+                    json!({ "name": "Range", "in": "header", "required": false, "description": "bytes=a-b, bytes=a- or bytes=-n", "schema": { "type": "string" } }),
+                ],
+                None,
+                vec![
+                    binary("200", "The blob"),
+                    binary("206", "A range of the blob (Content-Range)"),
+                    ok("304", "Not modified", None),
+                    ok("409", "The model is not ready", Some(r("Error"))),
+                    ok(
+                        "416",
+                        "Bad range (Content-Range: bytes */length)",
+                        Some(r("Error")),
+                    ),
+                ],
+            ),
+        )],
+    );
+    add(
+        "/api/v1/models/{id}/lod/file",
+        vec![(
+            "get",
+            op(
+                "lod",
+                "The whole .mwlod file, with one byte range per request (neighbouring patches are contiguous); ETag, If-None-Match, If-Range",
+                "viewer",
+                vec![
+                    model_id(),
+                    json!({ "name": "Range", "in": "header", "required": false, "description": "bytes=a-b, bytes=a- or bytes=-n", "schema": { "type": "string" } }),
+                ],
+                None,
+                vec![
+                    binary("200", "The file"),
+                    binary("206", "A range of the file (Content-Range)"),
+                    ok("304", "Not modified", None),
+                    ok("409", "The model is not ready", Some(r("Error"))),
+                    ok("416", "Bad range", Some(r("Error"))),
+                ],
+            ),
+        )],
+    );
+    {
+        // Server-side rendering (src/web/render.rs).
+        let common = vec![
+            model_id(),
+            query_param(
+                "eye",
+                "string",
+                "camera position x,y,z (default: the model's overview camera)",
+            ),
+            query_param(
+                "target",
+                "string",
+                "point looked at x,y,z (default: the model's centre; needs eye)",
+            ),
+            query_param(
+                "up",
+                "string",
+                "up vector x,y,z (default +Y; not parallel to the view direction)",
+            ),
+            query_param(
+                "fovy",
+                "number",
+                "vertical field of view in degrees, 1-170 (default 45)",
+            ),
+            query_param(
+                "w",
+                "integer",
+                "image width, 1 to MESHWIKI_RENDER_MAX_SIDE (default 640); w*h at most MESHWIKI_RENDER_MAX_PIXELS",
+            ),
+            query_param("h", "integer", "image height (default 480)"),
+            query_param(
+                "parts",
+                "string",
+                "comma-separated part ids of this model to tint, in order (at most 64)",
+            ),
+            query_param(
+                "hover",
+                "string",
+                "a part id of this model to outline (the hovered part)",
+            ),
+            query_param(
+                "px",
+                "number",
+                "pixel error of the view-dependent cut, 0.25-64 (default 1)",
+            ),
+        ];
+        let busy = || {
+            let mut r = json!({ "description": "Render queue full (with Retry-After, seconds) or no GPU adapter on the server", "content": { "application/json": { "schema": r("Error") } } });
+            r["headers"] = json!({"Retry-After": {"schema": {"type": "integer"}, "description": "seconds; absent when rendering is unavailable"}});
+            ("503".to_string(), r)
+        };
+        let not_ready = || {
+            ok(
+                "409",
+                "The model is not ready (pending, building or failed)",
+                Some(r("Error")),
+            )
+        };
+        let mut image_params = common.clone();
+        image_params.extend([
+            query_param("format", "string", "png (default), jpeg or webp (lossless)"),
+            query_param("quality", "integer", "JPEG quality 1-100 (default 90)"),
+            query_param("callouts", "integer", "1: draw labels (the first assigned content's title) with leader lines for the parts named in parts/hover, or for every part of the model when none is named"),
+        ]);
+        add(
+            "/api/v1/models/{id}/render",
+            vec![(
+                "get",
+                op(
+                    "render",
+                    "Render the model's hierarchy (1-pixel cut) from a camera: parts tinted, the hovered part outlined, callouts on request. Runs on a bounded worker pool (MESHWIKI_RENDER_WORKERS, MESHWIKI_RENDER_QUEUE); every parameter is checked (400)",
+                    "viewer",
+                    image_params,
+                    None,
+                    vec![
+                        (
+                            "200".to_string(),
+                            json!({ "description": "The image (X-Render-Triangles, X-Render-Patches, X-Render-Ms headers)", "content": {
+                                "image/png": { "schema": { "type": "string", "format": "binary" } },
+                                "image/jpeg": { "schema": { "type": "string", "format": "binary" } },
+                                "image/webp": { "schema": { "type": "string", "format": "binary" } } } }),
+                        ),
+                        not_ready(),
+                        busy(),
+                    ],
+                ),
+            )],
+        );
+        let mut buffer_params = common.clone();
+        buffer_params.push(query_param(
+            "buffers",
+            "string",
+            "comma-separated subset of color, normal, depth, ids (default normal,depth,ids)",
+        ));
+        add(
+            "/api/v1/models/{id}/render/buffers",
+            vec![(
+                "get",
+                op(
+                    "render",
+                    "Per-pixel buffers for tools. Body (little endian): \"MWRB\", u32 version 1, u32 J, J bytes of JSON header (width, height, camera, stats, buffers: [{name, type, components, offset, bytes}]), then the arrays at their offsets, row-major, top row first: color u8x4, normal f32x3 (0 on the background), depth f32 (linear view depth, +inf on the background), node u32, vertex u32 (original vertex id of the model), triangle u32, highlight u32 (bits 0-7: 1-based index in parts, bit 8: hover, bit 31: covered); ids 0xFFFFFFFF on the background",
+                    "viewer",
+                    buffer_params,
+                    None,
+                    vec![binary("200", "The buffers"), not_ready(), busy()],
+                ),
+            )],
+        );
+        add(
+            "/api/v1/models/{id}/render/callouts",
+            vec![(
+                "get",
+                op(
+                    "render",
+                    "The callout layout for a view, for the browser to draw as HTML: each visible part's anchor (its centre) projected, labels placed without overlap, leader lines; parts hidden (behind, outside, occluded, no room) are listed with the reason",
+                    "viewer",
+                    common,
+                    None,
+                    vec![
+                        ok("200", "The layout", Some(r("CalloutLayout"))),
+                        not_ready(),
+                        busy(),
+                    ],
+                ),
+            )],
+        );
+    }
+    add(
+        "/api/v1/jobs",
+        vec![(
+            "get",
+            op(
+                "jobs",
+                "List build jobs, newest first",
+                "admin",
+                {
+                    let mut p = paging();
+                    p.push(query_param(
+                        "status",
+                        "string",
+                        "only jobs in this state (queued, running, done, failed, cancelled)",
+                    ));
+                    p
+                },
+                None,
+                vec![ok("200", "Jobs", Some(array(r("Job"))))],
+            ),
+        )],
+    );
+    add(
+        "/api/v1/jobs/{id}",
+        vec![(
+            "get",
+            op(
+                "jobs",
+                "A build job with its progress (poll it while it runs)",
+                "viewer",
+                vec![id_param("id", "job id")],
+                None,
+                vec![ok("200", "Job", Some(r("Job")))],
+            ),
+        )],
+    );
+    add(
+        "/api/v1/jobs/{id}/cancel",
+        vec![(
+            "post",
+            op(
+                "jobs",
+                "Cancel a job: a queued job is cancelled at once (200), a running one stops within about a second (202); its model becomes failed and nothing is left on disk",
+                "admin",
+                vec![id_param("id", "job id")],
+                None,
+                vec![
+                    ok("200", "Cancelled", Some(r("Job"))),
+                    ok("202", "Cancellation requested", Some(r("Job"))),
+                    ok("409", "The job has already ended", Some(r("Error"))),
+                ],
+            ),
+        )],
+    );
+    add(
         "/api/v1/models/{id}/parts",
         vec![
             (
@@ -830,6 +1117,13 @@ fn multipart_body() -> Value {
     }}}})
 }
 
+fn binary(status: &str, description: &str) -> (String, Value) {
+    (
+        status.to_string(),
+        json!({ "description": description, "content": { "application/octet-stream": { "schema": { "type": "string", "format": "binary" } } } }),
+    )
+}
+
 fn obj(required: &[&str], props: Value) -> Value {
     json!({ "type": "object", "required": required, "properties": props })
 }
@@ -841,7 +1135,7 @@ fn schemas() -> Value {
     let nint = json!({"type": "integer", "format": "int64", "nullable": true});
     let vec3 = json!({"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3});
     let role = json!({"type": "string", "enum": ["admin", "editor", "viewer"]});
-    json!({
+    let mut all = json!({
         "Error": obj(&["error"], json!({"error": str_})),
         "LoginRequest": obj(&["username", "password"], json!({"username": str_, "password": str_})),
         "Session": obj(&["csrf_token", "user"], json!({"csrf_token": str_, "expires_at": int, "user": r("User")})),
@@ -918,5 +1212,107 @@ fn schemas() -> Value {
         "ChangeEvent": obj(&["type"], json!({
             "type": {"type": "string", "enum": ["part.created", "part.updated", "part.deleted", "part.contents", "content.updated", "content.deleted"]},
             "model_id": nint, "part_id": nint, "content_id": nint})),
-    })
+    });
+    all["Job"] = job_schema();
+    all["LodHierarchy"] = lod_schema();
+    render_schemas(&mut all);
+    all
+}
+
+/// Schema of a build job.
+fn job_schema() -> Value {
+    let int = json!({"type": "integer", "format": "int64"});
+    let str_ = json!({"type": "string"});
+    let time = json!({"type": "string", "format": "date-time"});
+    let nint = json!({"type": "integer", "format": "int64", "nullable": true});
+    obj(
+        &["id", "kind", "status", "percent"],
+        json!({
+            "id": int, "kind": {"type": "string", "enum": ["upload", "file", "demo"]},
+            "model_id": nint,
+            "status": {"type": "string", "enum": ["queued", "running", "done", "failed", "cancelled"]},
+            "source_name": str_, "source_bytes": int,
+            "options": {"type": "object", "description": "build options (memory_budget, max_patch_triangles, threads, triangles)"},
+            "stage": {"type": "string", "description": "import, generating, partitioning, simplifying level N, writing, thumbnail, done"},
+            "done": {"type": "integer", "description": "units of the stage done"},
+            "total": {"type": "integer", "description": "units of the stage in all"},
+            "percent": {"type": "number", "description": "estimate for the whole job, 0-100"},
+            "message": {"type": "string", "nullable": true, "description": "why it failed"},
+            "report": {"type": "object", "nullable": true, "description": "the engine's build report once done"},
+            "attempts": int, "cancel_requested": {"type": "boolean"}, "created_by": nint,
+            "created_at": time, "started_at": {"type": "string", "format": "date-time", "nullable": true},
+            "finished_at": {"type": "string", "format": "date-time", "nullable": true}, "updated_at": time}),
+    )
+}
+
+/// Schema of the JSON LOD hierarchy (docs/FORMAT.md, HTTP).
+fn lod_schema() -> Value {
+    let int = json!({"type": "integer", "format": "int64"});
+    let nint = json!({"type": "integer", "format": "int64", "nullable": true});
+    let vec3 = json!({"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3});
+    obj(
+        &["version", "node_count", "nodes", "groups"],
+        json!({
+            "version": int, "node_count": int, "group_count": int, "level_count": int, "root_count": int,
+            "max_patch_triangles": int, "input_vertices": int, "input_triangles": int,
+            "bbox": r("BBox"),
+            "grid": obj(&["origin", "step"], json!({"origin": vec3, "step": {"type": "number"}})),
+            "has_colors": {"type": "boolean"}, "has_normals": {"type": "boolean"}, "file_bytes": int,
+            "nodes": array(obj(&["id", "level", "offset", "length", "crc32"], json!({
+                "id": int, "level": int, "triangles": int, "vertices": int,
+                "bounds": {"type": "array", "items": {"type": "number"}, "description": "x, y, z, radius"},
+                "cone": {"type": "array", "items": {"type": "number"}, "description": "axis x, y, z, cutoff"},
+                "lod_sphere": {"type": "array", "items": {"type": "number"}}, "lod_error": {"type": "number"},
+                "parent_sphere": {"type": "array", "items": {"type": "number"}},
+                "parent_error": {"type": "number", "nullable": true, "description": "null for roots"},
+                "producer": nint, "member_of": nint,
+                "offset": int, "length": int, "crc32": int}))),
+            "groups": array(obj(&["id", "members", "products"], json!({
+                "id": int, "level": int, "sphere": {"type": "array", "items": {"type": "number"}},
+                "error": {"type": "number"}, "members": array(int.clone()), "products": array(int.clone())})))}),
+    )
+}
+
+/// Schemas of server-side rendering (`web::render`, `render::views`) and its additions to
+/// parts, assignments and search links.
+fn render_schemas(all: &mut Value) {
+    let int = json!({"type": "integer", "format": "int64"});
+    let nint = json!({"type": "integer", "format": "int64", "nullable": true});
+    let num = json!({"type": "number"});
+    all["Camera"]["properties"]["auto"] = json!({"type": "boolean", "description":
+        "true: the server's best view of the part (computed when the part is created without a \
+         camera, and again whenever its vertex set changes); absent or false: given by a client \
+         and kept. A patch with camera null hands the part back to the server's best view"});
+    all["Part"]["properties"]["camera"]["description"] =
+        json!("best view (auto) or the client's camera; null until the server has computed it");
+    all["Part"]["properties"]["thumbnail_attachment_id"]["description"] = json!(
+        "rendered by the server (320x240, the part tinted) when the part is created without one \
+         and whenever its vertex set changes (unless the same request sets one)"
+    );
+    all["AssignedPart"]["properties"]["thumbnail_attachment_id"] = nint.clone();
+    let link = &mut all["PartLink"]["properties"];
+    link["thumbnail_attachment_id"] = nint;
+    link["camera"] =
+        json!({"allOf": [r("Camera")], "nullable": true, "description": "the part's best view"});
+    link["image_url"] = json!({"type": "string", "nullable": true,
+        "description": "GET /api/v1/models/{id}/render of the best view with the part tinted"});
+    let rect = obj(
+        &["x", "y", "w", "h"],
+        json!({"x": num, "y": num, "w": num, "h": num}),
+    );
+    let point = json!({"type": "array", "items": num, "description": "pixel x, y (y down)"});
+    all["CalloutLayout"] = obj(
+        &["width", "height", "callouts", "hidden"],
+        json!({
+            "width": int, "height": int, "font_scale": int,
+            "camera": {"type": "object", "description": "eye, target, up, fovy, width, height used"},
+            "callouts": array(obj(&["part", "title", "anchor", "label", "leader"], json!({
+                "part": int, "title": {"type": "string"},
+                "text": {"type": "string", "description": "the label's text (long titles cut)"},
+                "anchor": point, "depth": num, "label": rect,
+                "leader": {"type": "array", "items": point, "description": "from the anchor to the label"},
+                "placement": {"type": "string", "enum": ["around", "left", "right", "top", "bottom"]}}))),
+            "hidden": array(obj(&["part", "reason"], json!({"part": int,
+                "reason": {"type": "string", "enum": ["behind", "outside", "occluded", "no_room"]}})))}),
+    );
 }

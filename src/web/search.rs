@@ -74,6 +74,24 @@ pub struct PartLink {
     pub kind: String,
     /// `/models/{model_id}?part={id}`.
     pub url: String,
+    /// The part's thumbnail (an attachment), once rendered.
+    pub thumbnail_attachment_id: Option<i64>,
+    /// The part's best view (or the camera a client gave it).
+    pub camera: Option<crate::store::parts::Camera>,
+    /// A server-rendered image of that view with the part tinted (for clients without 3D).
+    pub image_url: Option<String>,
+}
+
+/// `GET /api/v1/models/{model_id}/render` of `camera` at 640×480 with `part` tinted.
+pub fn view_image_url(model_id: i64, part: i64, camera: &crate::store::parts::Camera) -> String {
+    let v = |a: &[f64; 3]| format!("{},{},{}", a[0], a[1], a[2]);
+    format!(
+        "/api/v1/models/{model_id}/render?eye={}&target={}&up={}&fovy={}&w=640&h=480&parts={part}",
+        v(&camera.eye),
+        v(&camera.target),
+        v(&camera.up),
+        camera.fovy
+    )
 }
 
 /// A search hit with the parts it is assigned to.
@@ -93,6 +111,9 @@ pub async fn part_links(state: &AppState, content_id: i64) -> Result<Vec<PartLin
         .into_iter()
         .map(|p| PartLink {
             url: format!("/models/{}?part={}", p.model_id, p.id),
+            camera: p.camera(),
+            image_url: p.camera().map(|c| view_image_url(p.model_id, p.id, &c)),
+            thumbnail_attachment_id: p.thumbnail_attachment_id,
             id: p.id,
             model_id: p.model_id,
             model_title: p.model_title,

@@ -29,18 +29,19 @@ pub const IMPORT_MAP: &str = r#"{"imports":{"three":"/static/vendor/three/build/
 /// Environment variable naming the `node_modules` directory to serve from.
 pub const DIR_ENV: &str = "MESHWIKI_NODE_MODULES";
 
-/// The `node_modules` directory holding every allowed file, if any: `$MESHWIKI_NODE_MODULES`,
-/// else `static/node_modules` under the working directory, else under the source tree the
-/// binary was built from. Looked up once.
+/// The `node_modules` directory holding every allowed file, if any: `$MESHWIKI_NODE_MODULES`
+/// when set (and only it), else `static/node_modules` under the working directory, else under
+/// the source tree the binary was built from. Looked up once.
 pub fn dir() -> Option<&'static Path> {
     static DIR: OnceLock<Option<PathBuf>> = OnceLock::new();
     DIR.get_or_init(|| {
-        let mut candidates = Vec::new();
-        if let Some(d) = std::env::var_os(DIR_ENV) {
-            candidates.push(PathBuf::from(d));
-        }
-        candidates.push(PathBuf::from("static/node_modules"));
-        candidates.push(Path::new(env!("CARGO_MANIFEST_DIR")).join("static/node_modules"));
+        let candidates = match std::env::var_os(DIR_ENV) {
+            Some(d) => vec![PathBuf::from(d)],
+            None => vec![
+                PathBuf::from("static/node_modules"),
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("static/node_modules"),
+            ],
+        };
         let found = candidates
             .into_iter()
             .find(|d| ALLOWED.iter().all(|f| d.join(f).is_file()));

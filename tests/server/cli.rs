@@ -161,7 +161,11 @@ fn demo_prints_credentials_seeds_and_serves() {
         .json();
     assert_eq!(assigned[0]["title"], "Sun disk with rays");
     assert!(
-        !c.get("/api/v1/search?q=ochre").json().as_array().unwrap().is_empty(),
+        !c.get("/api/v1/search?q=ochre")
+            .json()
+            .as_array()
+            .unwrap()
+            .is_empty(),
         "the seeded content is searchable"
     );
     let contents = c.get("/api/v1/contents").json();

@@ -161,7 +161,10 @@ fn import_then_export_cuts() {
     let bad = scans.path().join("broken.ply");
     let bytes = std::fs::read(&ply).unwrap();
     std::fs::write(&bad, &bytes[..bytes.len() * 2 / 3]).unwrap();
-    let out = meshwiki(&["import", bad.to_str().unwrap(), "--title", "Broken"], data);
+    let out = meshwiki(
+        &["import", bad.to_str().unwrap(), "--title", "Broken"],
+        data,
+    );
     assert!(!out.status.success());
     let stderr = text(&out.stderr);
     assert!(
@@ -219,12 +222,17 @@ fn import_then_export_cuts() {
         let mut ids = cut.ids.clone();
         ids.sort_unstable();
         ids.dedup();
-        assert_eq!(ids.len(), cut.ids.len(), "welded: one vertex per original id");
-        let welded = cut
-            .triangles
-            .iter()
-            .map(|t| t.map(|i| cut.ids[i as usize]));
-        assert_eq!(boundary(welded), input_boundary, "crack-free at error {error}");
+        assert_eq!(
+            ids.len(),
+            cut.ids.len(),
+            "welded: one vertex per original id"
+        );
+        let welded = cut.triangles.iter().map(|t| t.map(|i| cut.ids[i as usize]));
+        assert_eq!(
+            boundary(welded),
+            input_boundary,
+            "crack-free at error {error}"
+        );
     }
     // A view-dependent cut: the same nodes as the engine's.
     let b = lod.header();
@@ -272,7 +280,11 @@ fn import_then_export_cuts() {
         .sum();
     assert!(tris > 0);
     assert_eq!(cut.triangles.len() as u64, tris);
-    assert!(cut.ids.iter().all(|&id| (id as usize) < input.positions.len()));
+    assert!(
+        cut.ids
+            .iter()
+            .all(|&id| (id as usize) < input.positions.len())
+    );
     // Bad arguments and models fail with a message.
     for (args, expect) in [
         (vec!["export-cut", "1", "--out", "x.ply"], "--max-error"),
@@ -284,8 +296,14 @@ fn import_then_export_cuts() {
             vec!["export-cut", "1", "--max-error", "nan", "--out", "x.ply"],
             "finite",
         ),
-        (vec!["export-cut", "2", "--max-error", "0", "--out", "x.ply"], "failed"),
-        (vec!["export-cut", "77", "--max-error", "0", "--out", "x.ply"], "not found"),
+        (
+            vec!["export-cut", "2", "--max-error", "0", "--out", "x.ply"],
+            "failed",
+        ),
+        (
+            vec!["export-cut", "77", "--max-error", "0", "--out", "x.ply"],
+            "not found",
+        ),
     ] {
         let out = meshwiki(&args, data);
         assert!(!out.status.success(), "{args:?}");

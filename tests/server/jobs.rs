@@ -40,10 +40,22 @@ fn malformed_uploads_fail_with_the_importers_message() {
         *b = (i * 7919 % 251) as u8;
     }
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
-        ("truncated.ply", good[..good.len() / 2].to_vec(), "truncated"),
+        (
+            "truncated.ply",
+            good[..good.len() / 2].to_vec(),
+            "truncated",
+        ),
         ("garbage.ply", garbage.clone(), "garbage.ply"),
-        ("nan.obj", b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n".to_vec(), "line 2"),
-        ("index.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n".to_vec(), "out of range"),
+        (
+            "nan.obj",
+            b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n".to_vec(),
+            "line 2",
+        ),
+        (
+            "index.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n".to_vec(),
+            "out of range",
+        ),
         ("empty.stl", b"solid x\nendsolid x\n".to_vec(), "empty.stl"),
     ];
     for (name, data, expect) in cases {
@@ -57,7 +69,10 @@ fn malformed_uploads_fail_with_the_importers_message() {
         let job = wait_finished(&admin, job, 60);
         assert_eq!(job["status"], "failed", "{name}: {job}");
         let msg = job["message"].as_str().unwrap();
-        assert!(msg.contains(name), "{name}: the message names the file: {msg}");
+        assert!(
+            msg.contains(name),
+            "{name}: the message names the file: {msg}"
+        );
         assert!(msg.contains(expect), "{name}: {msg}");
         assert!(!msg.contains("src-"), "internal upload name leaked: {msg}");
         let m = admin.get(&format!("/api/v1/models/{model}")).json();
@@ -68,7 +83,12 @@ fn malformed_uploads_fail_with_the_importers_message() {
             .assert_error(409);
         assert!(e.contains("failed"), "{e}");
         // The model page shows the error (no JavaScript needed).
-        assert!(admin.get(&format!("/models/{model}")).text().contains("failed"));
+        assert!(
+            admin
+                .get(&format!("/models/{model}"))
+                .text()
+                .contains("failed")
+        );
     }
     no_leftovers(dir.path());
     assert!(names(&dir.path().join("models")).is_empty());
@@ -103,7 +123,10 @@ fn cancelling_running_and_queued_builds() {
     let e = admin
         .get(&format!("/api/v1/models/{model}/lod"))
         .assert_error(409);
-    assert!(e.contains("building") || e.contains("pending"), "{e}: {running}");
+    assert!(
+        e.contains("building") || e.contains("pending"),
+        "{e}: {running}"
+    );
 
     // Cancel the queued job: at once.
     let r = admin.post(&format!("/api/v1/jobs/{queued}/cancel"), &json!({}));
@@ -160,7 +183,10 @@ fn a_build_interrupted_by_a_crash_restarts() {
     assert_eq!(j["attempts"], 2);
     let m = admin.get(&format!("/api/v1/models/{model}")).json();
     assert_eq!(m["status"], "ready");
-    assert_eq!(admin.get(&format!("/api/v1/models/{model}/lod")).status, 200);
+    assert_eq!(
+        admin.get(&format!("/api/v1/models/{model}/lod")).status,
+        200
+    );
     no_leftovers(dir.path());
     assert_eq!(names(&models_dir), vec![format!("{model}.mwlod")]);
 }

@@ -13,7 +13,9 @@ use crate::harness::*;
 /// Writes the generated relief of about `triangles` triangles as binary PLY.
 pub fn relief_ply(dir: &Path, name: &str, triangles: u64) -> PathBuf {
     let path = dir.join(name);
-    Relief::new(triangles, 7).write_ply(&path).expect("write relief");
+    Relief::new(triangles, 7)
+        .write_ply(&path)
+        .expect("write relief");
     path
 }
 
@@ -53,10 +55,7 @@ pub fn wait_job(c: &Client, id: i64, secs: u64, done: impl Fn(&Value) -> bool) -
 /// Polls a job until it has ended.
 pub fn wait_finished(c: &Client, id: i64, secs: u64) -> Value {
     wait_job(c, id, secs, |j| {
-        matches!(
-            j["status"].as_str(),
-            Some("done" | "failed" | "cancelled")
-        )
+        matches!(j["status"].as_str(), Some("done" | "failed" | "cancelled"))
     })
 }
 
@@ -92,7 +91,10 @@ fn upload_build_and_serve_lod() {
     assert!(msg.contains(".ply"), "{msg}");
     upload_scan(&admin, "", "a.ply", data.clone()).assert_error(400);
     upload_scan(&admin, "x", "a.ply", Vec::new()).assert_error(400);
-    assert_eq!(admin.get("/api/v1/models").json().as_array().unwrap().len(), 0);
+    assert_eq!(
+        admin.get("/api/v1/models").json().as_array().unwrap().len(),
+        0
+    );
 
     // Upload, with a path in the name: only the extension (and a display name) is used.
     let r = upload_scan(&admin, "Relief", "../../etc/relief.PLY", data.clone());
@@ -157,10 +159,7 @@ fn upload_build_and_serve_lod() {
     assert_eq!(h["node_count"].as_u64(), Some(lod.nodes().len() as u64));
     assert_eq!(h["group_count"].as_u64(), Some(lod.groups().len() as u64));
     assert_eq!(h["file_bytes"].as_u64(), Some(lod.bytes().len() as u64));
-    assert_eq!(
-        h["input_triangles"].as_u64(),
-        Some(relief.triangle_count())
-    );
+    assert_eq!(h["input_triangles"].as_u64(), Some(relief.triangle_count()));
     let nodes = h["nodes"].as_array().unwrap();
     assert_eq!(nodes.len(), lod.nodes().len());
     for (i, (j, n)) in nodes.iter().zip(lod.nodes()).enumerate() {
@@ -227,7 +226,10 @@ fn upload_build_and_serve_lod() {
     assert_eq!(r.status, 206);
     assert_eq!(r.body, blob[blob.len() - 8..]);
     // A stale If-Range gets the whole blob.
-    let r = get_with(&path, &[("Range", "bytes=0-3"), ("If-Range", "\"00000000\"")]);
+    let r = get_with(
+        &path,
+        &[("Range", "bytes=0-3"), ("If-Range", "\"00000000\"")],
+    );
     assert_eq!(r.status, 200);
     assert_eq!(r.body, blob);
     for bad in [
@@ -244,7 +246,10 @@ fn upload_build_and_serve_lod() {
         );
     }
     viewer
-        .get(&format!("/api/v1/models/{model_id}/lod/patches/{}", last + 1))
+        .get(&format!(
+            "/api/v1/models/{model_id}/lod/patches/{}",
+            last + 1
+        ))
         .assert_error(404);
     viewer
         .get(&format!("/api/v1/models/{model_id}/lod/patches/abc"))
@@ -259,7 +264,10 @@ fn upload_build_and_serve_lod() {
         first.blob_offset,
         first.blob_offset + first.blob_len as u64 - 1
     );
-    let r = get_with(&format!("/api/v1/models/{model_id}/lod/file"), &[("Range", &range)]);
+    let r = get_with(
+        &format!("/api/v1/models/{model_id}/lod/file"),
+        &[("Range", &range)],
+    );
     assert_eq!(r.status, 206);
     assert_eq!(r.body, lod.blob(0).unwrap());
 
@@ -270,14 +278,22 @@ fn upload_build_and_serve_lod() {
         .assert_error(401);
     server.client().get(&path).assert_error(401);
     viewer.get("/api/v1/models/9999/lod").assert_error(404);
-    viewer.get("/api/v1/models/9999/lod/patches/0").assert_error(404);
+    viewer
+        .get("/api/v1/models/9999/lod/patches/0")
+        .assert_error(404);
     assert_eq!(viewer.get(&format!("/api/v1/jobs/{job_id}")).status, 200);
     viewer.get("/api/v1/jobs").assert_error(403);
     viewer
-        .post(&format!("/api/v1/jobs/{job_id}/cancel"), &serde_json::json!({}))
+        .post(
+            &format!("/api/v1/jobs/{job_id}/cancel"),
+            &serde_json::json!({}),
+        )
         .assert_error(403);
     admin
-        .post(&format!("/api/v1/jobs/{job_id}/cancel"), &serde_json::json!({}))
+        .post(
+            &format!("/api/v1/jobs/{job_id}/cancel"),
+            &serde_json::json!({}),
+        )
         .assert_error(409);
     let all = admin.get("/api/v1/jobs?status=done").json();
     assert_eq!(all.as_array().unwrap().len(), 1);
@@ -331,7 +347,10 @@ fn upload_build_and_serve_lod() {
         vec![format!("{model_id}.mwlod"), format!("{form_model}.mwlod")]
     );
     // Deleting a model removes its file; its hierarchy is gone.
-    assert_eq!(admin.delete(&format!("/api/v1/models/{form_model}")).status, 204);
+    assert_eq!(
+        admin.delete(&format!("/api/v1/models/{form_model}")).status,
+        204
+    );
     viewer
         .get(&format!("/api/v1/models/{form_model}/lod"))
         .assert_error(404);

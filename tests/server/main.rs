@@ -9,4 +9,7 @@ mod import;
 mod jobs;
 mod lod;
 mod pages;
+mod render;
 mod security;
+mod selection;
+mod viewer;

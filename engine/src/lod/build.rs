@@ -282,6 +282,8 @@ struct Builder<'a> {
     raw: ScratchFile,
     blobs: ScratchFile,
     grid: Grid,
+    /// Exact bounds of the input vertices.
+    bounds: ([f32; 3], [f32; 3]),
     nodes: Vec<Node>,
     groups: Vec<Group>,
     stages: Vec<(String, f64)>,
@@ -308,6 +310,7 @@ impl<'a> Builder<'a> {
             raw: ScratchFile::create(&scratch.join("patches.raw"))?,
             blobs: ScratchFile::create(&scratch.join("patches.blobs"))?,
             grid,
+            bounds: (ingested.bbox.0.into(), ingested.bbox.1.into()),
             nodes: Vec::new(),
             groups: Vec::new(),
             stages,
@@ -360,17 +363,9 @@ impl<'a> Builder<'a> {
         })
     }
 
-    /// Bounds of all leaves (the input geometry).
+    /// Exact bounds of the input geometry.
     fn bbox(&self) -> ([f32; 3], [f32; 3]) {
-        let mut lo = [f32::MAX; 3];
-        let mut hi = [f32::MIN; 3];
-        for n in self.nodes.iter().filter(|n| n.level == 0) {
-            for k in 0..3 {
-                lo[k] = lo[k].min(n.bounds[k] - n.bounds[3]);
-                hi[k] = hi[k].max(n.bounds[k] + n.bounds[3]);
-            }
-        }
-        (lo, hi)
+        self.bounds
     }
 
     /// Encodes a patch and appends it to both scratch files. Interior vertices are stored at

@@ -147,16 +147,16 @@ async fn show(
     let layout = Layout::new(&auth, model.title.clone());
     let can_edit = layout.can_edit();
     let ready = model.status == models::ModelStatus::Ready;
-    let viewer_message = if !ready {
+    let viewer_message = if !crate::web::vendor::available() {
+        "The 3D viewer is unavailable on this server: its front-end dependencies are not \
+         installed (npm ci --prefix static)."
+            .to_string()
+    } else if !ready {
         format!(
             "The 3D view of \u{201c}{}\u{201d} appears once the scan is imported (status: {}).",
             model.title,
             model.status.as_str()
         )
-    } else if !crate::web::vendor::available() {
-        "The 3D viewer is unavailable on this server: its front-end dependencies are not \
-         installed (npm ci --prefix static)."
-            .to_string()
     } else {
         format!(
             "Loading the 3D view of \u{201c}{}\u{201d}\u{2026}",

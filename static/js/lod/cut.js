@@ -12,7 +12,7 @@
 // Culling (frustum on `bounds`, back-face on `cone`) only removes nodes from what is drawn and
 // from what must be loaded.
 
-import { threshold } from './foveation.js';
+import { foveaDistance, thresholdAt } from './foveation.js';
 
 const EPS = 1.1920929e-7;
 
@@ -84,15 +84,27 @@ export class Cut {
     this.pinned = new Uint8Array(table.nodeCount);
   }
 
+  /** Distance (model radii) from the nearest fovea to the nearest member of group `g`. */
+  groupFoveaDistance(g, fov) {
+    if (fov.foveae.length === 0) return Infinity;
+    const b = this.t.bounds;
+    let d = Infinity;
+    for (const m of this.t.members[g]) {
+      d = Math.min(d, foveaDistance(fov.foveae, b[m * 4], b[m * 4 + 1], b[m * 4 + 2], b[m * 4 + 3], fov.modelRadius));
+    }
+    return d;
+  }
+
   /**
    * Decides what to draw and what to load.
    * @param view from makeView
    * @param {Uint8Array} resident 1 for nodes whose patch is decoded and on the GPU
-   * @param {number} foveaRadius radius (model radii) around foveae where the fovea error is measured
+   * @param {number} foveaRadius distance (model radii) from a fovea within which drawn patches count for `foveaError`
+   * @param {number[][]|null} probes points where `foveaError` is measured instead of the foveae
    * @returns {{draw: number[], requests: {node: number, priority: number}[], triangles: number,
    *   maxError: number, maxRatio: number, foveaError: number, pending: number}}
    */
-  run(view, resident, foveaRadius = 0.02) {
+  run(view, resident, foveaRadius = 0.002, probes = null) {
     const t = this.t;
     const { inCut, visible, refined, pinned } = this;
     const fov = view.foveation;
@@ -124,7 +136,7 @@ export class Cut {
       const cy = gs[g * 4 + 1];
       const cz = gs[g * 4 + 2];
       const cr = gs[g * 4 + 3];
-      const ratio = projectedError(view, t.groupError[g], cx, cy, cz, cr) / threshold(fov, cx, cy, cz, cr);
+      const ratio = projectedError(view, t.groupError[g], cx, cy, cz, cr) / thresholdAt(fov, this.groupFoveaDistance(g, fov));
       const want = ratio > 1;
       let membersReady = true;
       for (const m of members) if (visible[m] && !resident[m]) membersReady = false;
@@ -165,11 +177,12 @@ export class Cut {
       const cr = ls[i * 4 + 3];
       const err = projectedError(view, t.lodError[i], cx, cy, cz, cr);
       if (err > maxError) maxError = err;
-      const ratio = err / threshold(fov, cx, cy, cz, cr);
+      const b = t.bounds;
+      const ratio = err / thresholdAt(fov, foveaDistance(fov.foveae, b[i * 4], b[i * 4 + 1], b[i * 4 + 2], b[i * 4 + 3], fov.modelRadius));
       if (ratio > maxRatio) maxRatio = ratio;
-      if (fov.foveae.length > 0) {
-        const b = t.bounds;
-        for (const f of fov.foveae) {
+      const points = probes || fov.foveae;
+      if (points.length > 0) {
+        for (const f of points) {
           const d = Math.hypot(f[0] - b[i * 4], f[1] - b[i * 4 + 1], f[2] - b[i * 4 + 2]) - b[i * 4 + 3];
           if (d <= foveaRadius * fov.modelRadius && err > foveaError) foveaError = err;
         }

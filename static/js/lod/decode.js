@@ -4,6 +4,8 @@
 //
 // Arithmetic: positions, ids and their residuals exceed 2^31, so everything is done on
 // doubles holding exact integers (|v| < 2^53); no 32-bit bitwise operator touches them.
+// Normals: every vertex gets the area-weighted normal of the integer grid positions (f64,
+// exact); border vertices add a stored octahedral residual (8 bits) to that prediction.
 
 const MAGIC = [0x4d, 0x57, 0x50, 0x32]; // "MWP2"
 const COMPRESSION_NONE = 0;
@@ -170,6 +172,86 @@ export function computedNormals(positions, indices, vertexCount) {
   return acc;
 }
 
+const OCT_SCALE = 127;
+
+/**
+ * Area-weighted vertex normals from the integer grid coordinates, in f64 (exact products,
+ * triangle-order sums: bit-identical to the reference `grid_normals`).
+ */
+export function gridNormals(pos, indices, n) {
+  const acc = new Float64Array(n * 3);
+  for (let i = 0; i + 2 < indices.length; i += 3) {
+    const a = indices[i] * 3;
+    const b = indices[i + 1] * 3;
+    const c = indices[i + 2] * 3;
+    const ux = pos[b] - pos[a];
+    const uy = pos[b + 1] - pos[a + 1];
+    const uz = pos[b + 2] - pos[a + 2];
+    const wx = pos[c] - pos[a];
+    const wy = pos[c + 1] - pos[a + 1];
+    const wz = pos[c + 2] - pos[a + 2];
+    const nx = uy * wz - uz * wy;
+    const ny = uz * wx - ux * wz;
+    const nz = ux * wy - uy * wx;
+    for (const o of [a, b, c]) {
+      acc[o] += nx;
+      acc[o + 1] += ny;
+      acc[o + 2] += nz;
+    }
+  }
+  for (let o = 0; o < acc.length; o += 3) {
+    const len = Math.sqrt(acc[o] * acc[o] + acc[o + 1] * acc[o + 1] + acc[o + 2] * acc[o + 2]);
+    if (len > 0) {
+      acc[o] /= len;
+      acc[o + 1] /= len;
+      acc[o + 2] /= len;
+    } else {
+      acc[o] = 0;
+      acc[o + 1] = 0;
+      acc[o + 2] = 1;
+    }
+  }
+  return acc;
+}
+
+/** Octahedral coordinates of a unit vector (8 bits, `floor(x + 0.5)` rounding) into `out`. */
+export function octEncode(nx, ny, nz, out) {
+  const l1 = Math.abs(nx) + Math.abs(ny) + Math.abs(nz);
+  if (!(l1 > 0)) {
+    out[0] = 0;
+    out[1] = 0;
+    return out;
+  }
+  let x = nx / l1;
+  let y = ny / l1;
+  if (nz < 0) {
+    const ax = Math.abs(x);
+    const ay = Math.abs(y);
+    x = (1 - ay) * (x >= 0 ? 1 : -1);
+    y = (1 - ax) * (y >= 0 ? 1 : -1);
+  }
+  out[0] = Math.floor(x * OCT_SCALE + 0.5);
+  out[1] = Math.floor(y * OCT_SCALE + 0.5);
+  return out;
+}
+
+/** Unit vector of octahedral coordinates, written as f32 at `out[at..at + 3]`. */
+export function octDecode(qx, qy, out, at) {
+  let x = Math.min(Math.max(qx, -127), 127) / OCT_SCALE;
+  let y = Math.min(Math.max(qy, -127), 127) / OCT_SCALE;
+  const z = 1 - Math.abs(x) - Math.abs(y);
+  if (z < 0) {
+    const nx = (1 - Math.abs(y)) * (x >= 0 ? 1 : -1);
+    const ny = (1 - Math.abs(x)) * (y >= 0 ? 1 : -1);
+    x = nx;
+    y = ny;
+  }
+  const len = Math.sqrt(x * x + y * y + z * z);
+  out[at] = x / len;
+  out[at + 1] = y / len;
+  out[at + 2] = z / len;
+}
+
 /**
  * Decodes one patch blob.
  * @param {Uint8Array} blob
@@ -284,29 +366,16 @@ export function decodePatch(blob, grid, deps) {
   }
   let normals = null;
   if (flags & FLAG_NORMALS) {
-    normals = computedNormals(positions, indices, n);
-    let borderCount = 0;
-    for (let v = 0; v < n; v++) borderCount += border[v];
-    if (borderCount > 0) {
-      const octBytes = new Uint8Array(borderCount * 8);
-      try {
-        meshopt.decodeVertexBuffer(octBytes, borderCount, 8, norS, 'OCTAHEDRAL');
-      } catch {
-        throw new DecodeError('stream normals does not decode');
-      }
-      const oct = new Int16Array(octBytes.buffer);
-      let s = 0;
-      for (let v = 0; v < n; v++) {
-        if (!border[v]) continue;
-        const x = oct[s * 4];
-        const y = oct[s * 4 + 1];
-        const z = oct[s * 4 + 2];
-        s++;
-        const len = Math.max(f(Math.sqrt(f(f(f(x * x) + f(y * y)) + f(z * z)))), f(1e-12));
-        normals[v * 3] = x / len;
-        normals[v * 3 + 1] = y / len;
-        normals[v * 3 + 2] = z / len;
-      }
+    const predicted = gridNormals(pos, indices, n);
+    normals = Float32Array.from(predicted);
+    const cursor = { at: 0 };
+    const q = [0, 0];
+    for (let v = 0; v < n; v++) {
+      if (!border[v]) continue;
+      octEncode(predicted[v * 3], predicted[v * 3 + 1], predicted[v * 3 + 2], q);
+      const qx = q[0] + readVarint(norS, cursor);
+      const qy = q[1] + readVarint(norS, cursor);
+      octDecode(qx, qy, normals, v * 3);
     }
   }
   return {

@@ -13,17 +13,21 @@
 // a coarse periphery, small α a gentle falloff. Several foveae combine as eq. 13–14: each
 // point takes its nearest fovea, i.e. the best (smallest) threshold.
 //
-// The threshold is evaluated on a sphere (the distance from the fovea to the sphere's nearest
-// point), so group members and products, which share spheres, decide together; and a sphere
-// that contains another is never given a larger threshold, which keeps cuts consistent.
+// The threshold is a property of a group, so its members and products decide together and
+// every cut stays watertight: the distance from the fovea to the nearest of the group's
+// members (their tight bounding spheres). Group error spheres contain all their descendants
+// and are large, so the distance to them would be zero for most of the model; the members'
+// tight bounds put the fovea's own patches at the target and the rest further out. A coarse
+// group may then want less refinement than one of its descendants; the cut is decided
+// coarsest first, so that descendant simply waits (never a hole).
 
 /** Default distortion α and cap r_max (fractions of the model radius). */
-export const DEFAULT_ALPHA = 12;
+export const DEFAULT_ALPHA = 20;
 export const DEFAULT_RMAX = 1.5;
 
 /**
- * Distance from the nearest fovea to a sphere, in model radii (eq. 14: the minimum over
- * foveae), 0 when a fovea is inside it; `Infinity` without foveae.
+ * Distance from the nearest fovea (eq. 14: the minimum over foveae) to a sphere's nearest
+ * point, in model radii: 0 when a fovea is inside it, `Infinity` without foveae.
  */
 export function foveaDistance(foveae, cx, cy, cz, r, modelRadius) {
   let best = Infinity;
@@ -36,14 +40,20 @@ export function foveaDistance(foveae, cx, cy, cz, r, modelRadius) {
 }
 
 /**
- * The pixel threshold for a sphere: `target` at a fovea, growing as the inverse sampling
- * density of the log transform away from it; `target` everywhere without foveae.
- * @param {{target: number, foveae: number[][], alpha: number, rMax: number, modelRadius: number}} f
+ * The pixel threshold at distance `d` (model radii) from the nearest fovea: `target` at the
+ * fovea, growing as the inverse sampling density of the log transform away from it;
+ * `target` everywhere without foveae.
+ * @param {{target: number, foveae: number[][], alpha: number, rMax: number}} f
  */
+export function thresholdAt(f, d) {
+  if (f.foveae.length === 0) return f.target;
+  return f.target * (f.alpha * Math.min(d, f.rMax) + 1);
+}
+
+/** The threshold for a sphere (its nearest point to a fovea). */
 export function threshold(f, cx, cy, cz, r) {
   if (f.foveae.length === 0) return f.target;
-  const d = foveaDistance(f.foveae, cx, cy, cz, r, f.modelRadius);
-  return f.target * (f.alpha * Math.min(d, f.rMax) + 1);
+  return thresholdAt(f, foveaDistance(f.foveae, cx, cy, cz, r, f.modelRadius));
 }
 
 /** The log transform itself (eq. 1) and the scale that maps r_max to v_max (eq. 3). */

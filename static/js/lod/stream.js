@@ -50,6 +50,7 @@ export class Streamer {
     this.inFlightBytes = 0;
     this.failed = new Map(); // node -> time of failure
     this.foveae = [];
+    this.probes = null; // where the fovea error is measured (default: the foveae)
     this.tokens = 0;
     this.tokensAt = performance.now();
     this.stats = { bytes: 0, requests: 0, patches: 0, evicted: 0, errors: 0 };
@@ -85,7 +86,7 @@ export class Streamer {
       modelRadius: this.table.radius,
     };
     const view = makeView(camera, foveation);
-    const result = this.cut.run(view, this.resident);
+    const result = this.cut.run(view, this.resident, 0.002, this.probes);
     this.cache.touch(result.draw);
     for (const node of this.cache.evict(this.cut.pinned)) {
       this.resident[node] = 0;

@@ -1,6 +1,7 @@
 // The 3D viewer of the model page (progressive enhancement of `<div id="viewer">`): streams
 // the model's patches view-dependently, draws them with three.js, shows the parts as callouts
-// and exact highlights, opens their information, lands on a linked part, follows live edits.
+// and exact highlights, opens their information, lands on a linked part, follows live edits;
+// editors also get the region-selection tools (../select/).
 
 import * as THREE from 'three';
 import { parseBinary, fromJson } from '../lod/table.js';
@@ -15,6 +16,7 @@ import { Navigation, framing } from './navigation.js';
 import { pick, firstHitDistance } from './picking.js';
 import { makeToolbar } from './toolbar.js';
 import { linkedPart, parseCamera, writePart } from './url.js';
+import { SelectController } from '../select/controller.js';
 
 const CALLOUT_INTERVAL_MS = 120;
 const CLICK_SLOP_PX = 5;
@@ -46,6 +48,7 @@ class Viewer {
     this.lastLayout = 0;
     this.layoutDirty = true;
     this.result = null;
+    this.selection = null;
 
     root.replaceChildren();
     root.classList.add('viewer-live');
@@ -73,6 +76,7 @@ class Viewer {
       onEvict: (node) => {
         this.view.removePatch(node);
         this.store.removePatch(node);
+        if (this.selection) this.selection.highlight.removePatch(node);
       },
       onChange: () => this.requestFrame(),
     });
@@ -92,6 +96,8 @@ class Viewer {
         this.requestFrame();
       },
     });
+    this.selection = data.can_edit ? this.makeSelection() : null;
+    if (this.selection) this.toolbar.addGroup(this.selection.element);
     this.store.onChange(() => this.partsChanged());
     this.bindPointer();
     new ResizeObserver(() => {
@@ -102,6 +108,31 @@ class Viewer {
     this.land();
     this.store.loadBitmaps();
     this.requestFrame();
+  }
+
+  /** The region-selection tools (editors), drawing on this view. */
+  makeSelection() {
+    return new SelectController(this.root, this.stage, {
+      modelId: this.modelId,
+      radius: this.table.radius,
+      vertices: this.table.inputVertices,
+      camera: () => this.cameraState(),
+      pauseNavigation: (on) => {
+        this.nav.controls.enabled = !on;
+        this.stage.classList.toggle('selecting', on);
+        if (on) this.setHover(null);
+      },
+      highlightChanged: () => this.markAll(),
+      partConfirmed: async (part) => {
+        await this.store.reloadPart(part.id);
+        this.select(part.id, true);
+      },
+      contentsChanged: async (id) => {
+        await this.store.reloadContents(id);
+        if (this.panel.partId === id) this.panel.open(id, this.store);
+      },
+      partTitle: (id) => this.store.title(id),
+    });
   }
 
   /** Initial camera: the URL's, else the linked part's best view, else the home view. */
@@ -138,6 +169,7 @@ class Viewer {
   patchLoaded(node, patch) {
     this.view.addPatch(node, patch);
     this.store.addPatch(node, patch);
+    if (this.selection) this.selection.highlight.addPatch(node, patch);
     this.markNode(node);
     this.layoutDirty = true;
     this.requestFrame();
@@ -161,7 +193,8 @@ class Viewer {
     const result = this.streamer.update(this.cameraState());
     this.result = result;
     this.view.setDrawn(result.draw);
-    const channel = this.hovered !== null ? 1 : this.selected !== null ? 2 : 0;
+    const drafting = this.selection !== null && this.selection.hasDraft();
+    const channel = this.hovered !== null ? 1 : this.selected !== null || drafting ? 2 : 0;
     this.view.render(channel);
     this.frames++;
     if (result.draw.length > 0 && this.firstImageAt === null) this.firstImageAt = performance.now() - this.started;
@@ -251,12 +284,19 @@ class Viewer {
     const attr = mesh.geometry.getAttribute('aMark');
     const marks = attr.array;
     const had = mesh.userData.marked;
-    if (!had && this.hovered === null && this.selected === null) return;
+    // A selection draft takes the selected part's tint (editing shows the draft, not the part).
+    const drafting = this.selection !== null && this.selection.hasDraft();
+    if (!had && this.hovered === null && this.selected === null && !drafting) return;
     marks.fill(0);
     let any = false;
+    const draft = drafting ? this.selection.highlight.verticesIn(node) : null;
+    if (draft) {
+      for (const v of draft) marks[v * 2 + 1] = 1;
+      any = true;
+    }
     for (const [id, channel] of [
       [this.hovered, 0],
-      [this.selected, 1],
+      [drafting ? null : this.selected, 1],
     ]) {
       if (id === null) continue;
       const verts = this.store.verticesIn(node, id);
@@ -289,6 +329,7 @@ class Viewer {
     writePart(id);
     if (id === null) this.panel.close();
     else if (open) this.panel.open(id, this.store);
+    if (this.selection) this.selection.setOpenPart(this.panel.partId);
     this.markAll();
     this.layoutDirty = true;
   }
@@ -439,11 +480,23 @@ async function boot() {
       camera: () => viewer.nav.get(),
       setCamera: (c) => viewer.nav.set(c),
       setFoveae: (points) => viewer.setFoveae(points),
+      /** Measures `foveaError` at these points instead of the foveae (bench). */
+      setProbes: (points) => {
+        viewer.streamer.probes = points;
+        viewer.requestFrame();
+      },
       setSettings: (s) => {
         viewer.streamer.setSettings(s);
         viewer.requestFrame();
       },
       select: (id) => viewer.select(id, true),
+      /** The region selection's state (editors; null for viewers). */
+      selection: () => (viewer.selection ? viewer.selection.state() : null),
+      /** Renders a frame now and returns it as a PNG data URL (tests, bench). */
+      snapshot: () => {
+        viewer.frame();
+        return viewer.view.canvas.toDataURL('image/png');
+      },
       project: (p) => viewer.project(p),
       partScreen: (id) => {
         const e = viewer.store.parts.get(id);

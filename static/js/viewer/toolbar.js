@@ -1,5 +1,6 @@
 // The viewer's toolbar: reset, fovea marking, streaming settings (target error, bandwidth,
-// maximum wait, GPU memory, foveation α) and a status line (what is drawn and streamed).
+// maximum wait, GPU memory, foveation α), a status line (what is drawn and streamed) and room
+// for further tool groups (the region selection's, on a row of its own).
 
 function button(label, title, onClick) {
   const b = document.createElement('button');
@@ -67,6 +68,10 @@ export function makeToolbar(host, settings, actions) {
     setFoveaMode(on) {
       fovea.classList.toggle('active', on);
       fovea.setAttribute('aria-pressed', String(on));
+    },
+    /** Appends a tool group (an element) after the status line. */
+    addGroup(el) {
+      bar.append(el);
     },
   };
 }

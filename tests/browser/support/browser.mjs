@@ -50,16 +50,35 @@ export async function launch() {
 /** Logs the page's context in through the login form. */
 export async function login(page, base, user) {
   await page.goto(`${base}/login`);
+  if ((await page.locator('input[name=username]').count()) === 0) return; // already logged in
   await page.fill('input[name=username]', user.username);
   await page.fill('input[name=password]', user.password);
   await Promise.all([page.waitForNavigation(), page.click('button[type=submit]')]);
 }
 
-/** Waits until the viewer exposes its API and `pred(stats)` holds. */
-export async function waitViewer(page, pred = 'true', timeout = 120_000) {
-  await page.waitForFunction(() => document.getElementById('viewer')?.dataset.ready === 'true' || document.getElementById('viewer')?.dataset.error, null, { timeout });
-  const error = await page.evaluate(() => document.getElementById('viewer').dataset.error);
-  if (error) throw new Error(`viewer failed: ${error}`);
-  await page.waitForFunction((p) => p(window.meshwikiViewer.stats()), pred, { timeout, polling: 100 });
-  return page.evaluate(() => window.meshwikiViewer.stats());
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+/**
+ * Polls `fn` in the page (page.evaluate, which the page's CSP allows, unlike string
+ * predicates) until `accept(value)` holds in Node; returns the value.
+ */
+export async function poll(page, fn, accept = Boolean, timeout = 60_000, arg = undefined) {
+  const end = Date.now() + timeout;
+  let value;
+  for (;;) {
+    value = await page.evaluate(fn, arg);
+    if (accept(value)) return value;
+    if (Date.now() > end) throw new Error(`timed out; last value ${JSON.stringify(value)?.slice(0, 400)}`);
+    await sleep(100);
+  }
+}
+
+/** Waits until the viewer runs and `pred(stats)` holds; returns the stats. */
+export async function waitViewer(page, pred = () => true, timeout = 120_000) {
+  const state = await poll(page, () => {
+    const v = document.getElementById('viewer');
+    return v ? { ready: v.dataset.ready === 'true', error: v.dataset.error || null } : { ready: false };
+  }, (s) => s.ready || s.error, timeout);
+  if (state.error) throw new Error(`viewer failed: ${state.error}`);
+  return poll(page, () => window.meshwikiViewer.stats(), pred, timeout);
 }

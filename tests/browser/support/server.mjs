@@ -30,8 +30,8 @@ export class Api {
       payload = JSON.stringify(json);
     }
     const res = await fetch(this.base + path, { method, headers: h, body: payload, redirect: 'manual' });
-    const set = res.headers.getSetCookie ? res.headers.getSetCookie() : [];
-    for (const c of set) if (c.startsWith('meshwiki_session=')) this.cookie = c.split(';')[0];
+    const set = res.headers.getSetCookie ? res.headers.getSetCookie() : (res.headers.get('set-cookie') || '').split(/,(?=\s*\w+=)/);
+    for (const c of set) if (c.trim().startsWith('meshwiki_session=')) this.cookie = c.trim().split(';')[0];
     if (raw) return res;
     const text = await res.text();
     if (!res.ok) throw new Error(`${method} ${path}: HTTP ${res.status}: ${text.slice(0, 300)}`);

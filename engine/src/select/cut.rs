@@ -1,0 +1,295 @@
+//! The graph cut (system paper §4.1.1): "the image is represented by a graph G = (V, E) where
+//! V corresponds to pixels ... and E corresponds to connections between eight neighboring
+//! pixels"; the labelling minimising eq. 1 is the minimum cut, found with the min-cut/max-flow
+//! algorithm of Boykov and Kolmogorov ([`super::maxflow_grid`]).
+//!
+//! t-links carry the data term (eq. 2–3, plus the heavy lasso's band prior), hard seeds a
+//! capacity of [`HARD`]; n-links carry `λ·E2` (eq. 4). Only pixels showing the model are in
+//! the graph: every link of a pixel off the model is zero. The grid is cropped to the bounding
+//! box of the pixels the cut decides (one pixel of margin): outside it every pixel is a seed.
+
+use std::time::Instant;
+
+use super::SelectError;
+use super::buffers::Buffers;
+use super::energy::{DataTerm, EnergyParams, SeedModel, Smoothness};
+use super::maxflow_grid::{GridEdges, GridGraph};
+use super::seeds::{BG, FG, OFF, Seeds, UNKNOWN};
+
+/// Capacity of a hard constraint (the "∞" of eq. 3): far above any sum of soft costs.
+pub const HARD: f32 = 1e9;
+
+/// What a cut did.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct CutStats {
+    /// Pixels in the graph (the cropped window) and pixels it decided.
+    pub nodes: usize,
+    pub unknown: usize,
+    /// Value of the maximum flow (the minimum energy, hard parts excluded).
+    pub flow: f64,
+    pub build_ms: f64,
+    pub solve_ms: f64,
+}
+
+/// Bounding box `[x0, x1) × [y0, y1)` of the unknown pixels, one pixel of margin.
+fn window(seeds: &Seeds) -> Option<(usize, usize, usize, usize)> {
+    let (w, h) = (seeds.width as usize, seeds.height as usize);
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for (i, &r) in seeds.role.iter().enumerate() {
+        if r == UNKNOWN {
+            let (x, y) = (i % w, i / w);
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x + 1);
+            y1 = y1.max(y + 1);
+        }
+    }
+    (x0 != usize::MAX).then(|| (x0.saturating_sub(1), y0.saturating_sub(1), (x1 + 1).min(w), (y1 + 1).min(h)))
+}
+
+/// Solves eq. 1 for `seeds` on `buffers`: returns per pixel whether it is foreground (always
+/// false off the model). `color_cue`: whether the model has colours (else colour is left out
+/// of both terms: the rendered colour of an uncoloured scan is only shading).
+pub fn graph_cut(
+    buffers: &Buffers<'_>,
+    seeds: &Seeds,
+    params: &EnergyParams,
+    color_cue: bool,
+) -> Result<(Vec<bool>, CutStats), SelectError> {
+    params.validate()?;
+    let t0 = Instant::now();
+    let (w, h) = (buffers.width as usize, buffers.height as usize);
+    if seeds.role.len() != w * h {
+        return Err(SelectError::SizeMismatch {
+            what: "the seeds",
+            got_w: seeds.width,
+            got_h: seeds.height,
+            width: buffers.width,
+            height: buffers.height,
+        });
+    }
+    let mut out: Vec<bool> = seeds.role.iter().map(|&r| r == FG).collect();
+    let mut stats = CutStats::default();
+    let Some((x0, y0, x1, y1)) = window(seeds) else {
+        return Ok((out, stats));
+    };
+    let (ww, wh) = (x1 - x0, y1 - y0);
+    let m = ww * wh;
+    let global = |lx: usize, ly: usize| (y0 + ly) * w + x0 + lx;
+
+    let smooth = Smoothness::estimate(buffers, params, color_cue);
+    let data = DataTerm::new(
+        SeedModel::fit(buffers, &seeds.fg_samples, params.clusters),
+        SeedModel::fit(buffers, &seeds.bg_samples, params.clusters),
+        params,
+        color_cue,
+    );
+    let mut source = vec![0f32; m];
+    let mut sink = vec![0f32; m];
+    let mut right = vec![0f32; m];
+    let mut down = vec![0f32; m];
+    let mut down_right = vec![0f32; m];
+    let mut down_left = vec![0f32; m];
+    let lambda = params.lambda;
+    let diagonal = lambda / std::f32::consts::SQRT_2;
+    for ly in 0..wh {
+        for lx in 0..ww {
+            let l = ly * ww + lx;
+            let g = global(lx, ly);
+            let role = seeds.role[g];
+            match role {
+                FG => source[l] = HARD,
+                BG => sink[l] = HARD,
+                UNKNOWN => {
+                    stats.unknown += 1;
+                    let (mut cf, mut cb) = data.costs(buffers, g);
+                    if let Some(pos) = &seeds.band_position
+                        && params.band_prior > 0.0
+                        && pos[g].is_finite()
+                    {
+                        cf += params.band_prior * pos[g];
+                        cb += params.band_prior * (1.0 - pos[g]);
+                    }
+                    // Cutting the source link puts the pixel in the background.
+                    source[l] = cb;
+                    sink[l] = cf;
+                }
+                _ => continue,
+            }
+            let link = |dx: isize, dy: usize, factor: f32, arr: &mut Vec<f32>| {
+                let nx = lx as isize + dx;
+                let ny = ly + dy;
+                if nx < 0 || nx as usize >= ww || ny >= wh {
+                    return;
+                }
+                let q = global(nx as usize, ny);
+                let rq = seeds.role[q];
+                if rq == OFF || (rq == role && role != UNKNOWN) {
+                    return;
+                }
+                arr[l] = factor * smooth.edge(buffers, g, q);
+            };
+            link(1, 0, lambda, &mut right);
+            link(0, 1, lambda, &mut down);
+            link(1, 1, diagonal, &mut down_right);
+            link(-1, 1, diagonal, &mut down_left);
+        }
+    }
+    stats.nodes = m;
+    let edges = GridEdges {
+        right: &right,
+        down: &down,
+        down_right: &down_right,
+        down_left: &down_left,
+    };
+    let mut graph = GridGraph::symmetric(ww, wh, &source, &sink, &edges)?;
+    let t1 = Instant::now();
+    stats.build_ms = (t1 - t0).as_secs_f64() * 1e3;
+    stats.flow = graph.maxflow();
+    stats.solve_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let labels = graph.labels();
+    for ly in 0..wh {
+        for lx in 0..ww {
+            let g = global(lx, ly);
+            if seeds.role[g] == UNKNOWN {
+                out[g] = labels[ly * ww + lx] == 1;
+            }
+        }
+    }
+    for (o, &r) in out.iter_mut().zip(&seeds.role) {
+        if r == OFF || r == BG {
+            *o = false;
+        }
+    }
+    Ok((out, stats))
+}
+
+/// Keeps the selected pixels 8-connected to a foreground seed through selected pixels
+/// (islands the cut found elsewhere are dropped, as a user expects of strokes).
+pub fn keep_connected_to_seeds(selected: &mut [bool], seeds: &Seeds) {
+    let (w, h) = (seeds.width as usize, seeds.height as usize);
+    let mut keep = vec![false; selected.len()];
+    let mut stack: Vec<usize> = (0..selected.len())
+        .filter(|&i| selected[i] && seeds.role[i] == FG)
+        .collect();
+    for &i in &stack {
+        keep[i] = true;
+    }
+    while let Some(i) = stack.pop() {
+        let (x, y) = (i % w, i / w);
+        for dy in -1isize..=1 {
+            for dx in -1isize..=1 {
+                let (nx, ny) = (x as isize + dx, y as isize + dy);
+                if nx < 0 || ny < 0 || nx as usize >= w || ny as usize >= h {
+                    continue;
+                }
+                let j = ny as usize * w + nx as usize;
+                if selected[j] && !keep[j] {
+                    keep[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    selected.copy_from_slice(&keep);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::select::buffers::OwnedBuffers;
+    use crate::select::mask::{self, StrokeMask};
+    use crate::select::seeds;
+
+    /// Markup with a foreground stroke on the left and a background stroke on the right.
+    fn strokes(w: u32, h: u32) -> StrokeMask {
+        let mut m = StrokeMask::empty(w, h).unwrap();
+        for y in 2..h - 2 {
+            m.labels[(y * w + 2) as usize] = mask::FOREGROUND;
+            m.labels[(y * w + w - 3) as usize] = mask::BACKGROUND;
+        }
+        m
+    }
+
+    fn left_half_selected(sel: &[bool], w: usize, split: usize) -> usize {
+        sel.iter()
+            .enumerate()
+            .filter(|&(i, &s)| s != (i % w < split))
+            .count()
+    }
+
+    #[test]
+    fn two_colours_split_at_the_colour_edge() {
+        let (w, h) = (40u32, 20u32);
+        let mut b = OwnedBuffers::flat(w, h);
+        for i in 0..(w * h) as usize {
+            if i % w as usize >= 23 {
+                b.color[i] = [30, 90, 200, 255];
+            } else {
+                b.color[i] = [200, 60, 30, 255];
+            }
+        }
+        let v = b.view();
+        let s = seeds::markup(&strokes(w, h), &v).unwrap();
+        let (sel, stats) = graph_cut(&v, &s, &EnergyParams::default(), true).unwrap();
+        assert_eq!(left_half_selected(&sel, w as usize, 23), 0);
+        assert!(stats.unknown > 0 && stats.flow > 0.0);
+    }
+
+    #[test]
+    fn normal_creases_split_without_colour() {
+        let (w, h) = (40u32, 20u32);
+        let mut b = OwnedBuffers::flat(w, h);
+        for i in 0..(w * h) as usize {
+            if i % w as usize >= 15 {
+                b.normal[i] = [0.6, 0.0, 0.8];
+            }
+        }
+        let v = b.view();
+        let s = seeds::markup(&strokes(w, h), &v).unwrap();
+        // Colour is ignored (no colour cue), the normal edge decides.
+        let (sel, _) = graph_cut(&v, &s, &EnergyParams::default(), false).unwrap();
+        assert_eq!(left_half_selected(&sel, w as usize, 15), 0);
+    }
+
+    #[test]
+    fn depth_steps_split_without_colour_or_normals() {
+        let (w, h) = (40u32, 20u32);
+        let mut b = OwnedBuffers::flat(w, h);
+        for i in 0..(w * h) as usize {
+            if i % w as usize >= 28 {
+                b.depth[i] = 1.5;
+            }
+        }
+        let v = b.view();
+        let s = seeds::markup(&strokes(w, h), &v).unwrap();
+        let params = EnergyParams {
+            w_n: 0.0,
+            ..EnergyParams::default()
+        };
+        let (sel, _) = graph_cut(&v, &s, &params, false).unwrap();
+        assert_eq!(left_half_selected(&sel, w as usize, 28), 0);
+    }
+
+    #[test]
+    fn pixels_off_the_model_are_never_selected() {
+        let (w, h) = (20u32, 10u32);
+        let mut b = OwnedBuffers::flat(w, h);
+        for y in 0..h as usize {
+            for x in 8..12 {
+                b.node[y * w as usize + x] = crate::render::NO_NODE;
+                b.depth[y * w as usize + x] = f32::INFINITY;
+            }
+        }
+        let v = b.view();
+        let s = seeds::markup(&strokes(w, h), &v).unwrap();
+        let (mut sel, _) = graph_cut(&v, &s, &EnergyParams::default(), false).unwrap();
+        keep_connected_to_seeds(&mut sel, &s);
+        for y in 0..h as usize {
+            for x in 8..w as usize {
+                assert!(!sel[y * w as usize + x], "({x}, {y})");
+            }
+        }
+        assert!(sel[5 * w as usize + 3]);
+    }
+}

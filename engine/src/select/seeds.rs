@@ -1,0 +1,426 @@
+//! Seeds of the three tools (system paper §4.1.1, §4.2):
+//!
+//! - **markup** (Lazy Snapping): foreground strokes are foreground seeds, background strokes
+//!   background seeds; everything else is decided by the cut.
+//! - **heavy lasso** (§4.2): one thick closed stroke along the boundary. "Our system
+//!   automatically sets a foreground seed and a background seed ... The foreground marker is
+//!   drawn along the inside of the heavy marker, and the background marker is drawn along the
+//!   outside": band pixels touching the enclosed area become foreground seeds, band pixels
+//!   touching the outer area background seeds. What the loop encloses is foreground and what
+//!   lies outside background (the markers' own sides: the user traced the boundary there), so
+//!   the cut only decides the band. The seed models of the data term are fitted on the two
+//!   markers. Each band pixel also gets its position across the band (0 at the inner marker, 1
+//!   at the outer) for the band prior ([`super::EnergyParams::band_prior`]).
+//! - **lasso**: the conventional tool; the polygon's inside is the selection, no cut.
+//!
+//! Pixels off the model are left out of the graph.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use super::SelectError;
+use super::buffers::Buffers;
+use super::mask::{self, StrokeMask};
+
+/// Role of a pixel: decided by the cut.
+pub const UNKNOWN: u8 = 0;
+/// Role of a pixel: hard foreground.
+pub const FG: u8 = 1;
+/// Role of a pixel: hard background.
+pub const BG: u8 = 2;
+/// Role of a pixel: not in the graph (no surface there).
+pub const OFF: u8 = 3;
+
+/// Seeds for a cut.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Seeds {
+    pub width: u32,
+    pub height: u32,
+    /// [`UNKNOWN`], [`FG`], [`BG`] or [`OFF`] per pixel.
+    pub role: Vec<u8>,
+    /// Marker pixels the foreground / background seed models are fitted on.
+    pub fg_samples: Vec<u32>,
+    pub bg_samples: Vec<u32>,
+    /// Heavy lasso: position across the band per pixel (0 inner marker … 1 outer marker),
+    /// NaN outside the band.
+    pub band_position: Option<Vec<f32>>,
+}
+
+impl Seeds {
+    /// Pixels the cut decides.
+    pub fn unknown_count(&self) -> usize {
+        self.role.iter().filter(|&&r| r == UNKNOWN).count()
+    }
+}
+
+fn check(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<(), SelectError> {
+    if mask.width != buffers.width || mask.height != buffers.height {
+        return Err(SelectError::SizeMismatch {
+            what: "the stroke mask",
+            got_w: mask.width,
+            got_h: mask.height,
+            width: buffers.width,
+            height: buffers.height,
+        });
+    }
+    Ok(())
+}
+
+/// Markup seeds (Lazy Snapping's foreground and background strokes).
+pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectError> {
+    check(mask, buffers)?;
+    let n = buffers.len();
+    let mut role = vec![UNKNOWN; n];
+    let (mut fg, mut bg) = (Vec::new(), Vec::new());
+    let (mut fg_drawn, mut bg_drawn) = (false, false);
+    for i in 0..n {
+        let label = mask.labels[i];
+        fg_drawn |= label == mask::FOREGROUND;
+        bg_drawn |= label == mask::BACKGROUND;
+        if !buffers.covered(i) {
+            role[i] = OFF;
+            continue;
+        }
+        match label {
+            mask::FOREGROUND => {
+                role[i] = FG;
+                fg.push(i as u32);
+            }
+            mask::BACKGROUND => {
+                role[i] = BG;
+                bg.push(i as u32);
+            }
+            _ => {}
+        }
+    }
+    if fg.is_empty() {
+        return Err(SelectError::EmptyStrokes(if fg_drawn {
+            "the foreground strokes miss the model: draw them on the region to select".into()
+        } else {
+            "markup needs foreground strokes (label 1) on the region to select".into()
+        }));
+    }
+    if bg.is_empty() {
+        return Err(SelectError::EmptyStrokes(if bg_drawn {
+            "the background strokes miss the model: draw them on the surface around the region"
+                .into()
+        } else {
+            "markup needs background strokes (label 2) on the surface around the region".into()
+        }));
+    }
+    Ok(Seeds {
+        width: buffers.width,
+        height: buffers.height,
+        role,
+        fg_samples: fg,
+        bg_samples: bg,
+        band_position: None,
+    })
+}
+
+/// Pixels not in `wall` that are 4-connected to the image border (a flood fill).
+fn outside_of(wall: &[bool], width: usize, height: usize) -> Vec<bool> {
+    let mut out = vec![false; wall.len()];
+    let mut stack: Vec<usize> = Vec::new();
+    let push = |i: usize, out: &mut Vec<bool>, stack: &mut Vec<usize>| {
+        if !wall[i] && !out[i] {
+            out[i] = true;
+            stack.push(i);
+        }
+    };
+    for x in 0..width {
+        push(x, &mut out, &mut stack);
+        push((height - 1) * width + x, &mut out, &mut stack);
+    }
+    for y in 0..height {
+        push(y * width, &mut out, &mut stack);
+        push(y * width + width - 1, &mut out, &mut stack);
+    }
+    while let Some(i) = stack.pop() {
+        let (x, y) = (i % width, i / width);
+        if x > 0 {
+            push(i - 1, &mut out, &mut stack);
+        }
+        if x + 1 < width {
+            push(i + 1, &mut out, &mut stack);
+        }
+        if y > 0 {
+            push(i - width, &mut out, &mut stack);
+        }
+        if y + 1 < height {
+            push(i + width, &mut out, &mut stack);
+        }
+    }
+    out
+}
+
+/// 8-neighbours of pixel `i` inside the image.
+#[inline]
+fn neighbours8(i: usize, width: usize, height: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = ((i % width) as isize, (i / width) as isize);
+    const D: [(isize, isize); 8] = [
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ];
+    D.iter().filter_map(move |&(dx, dy)| {
+        let (nx, ny) = (x + dx, y + dy);
+        (nx >= 0 && ny >= 0 && (nx as usize) < width && (ny as usize) < height)
+            .then(|| ny as usize * width + nx as usize)
+    })
+}
+
+/// Chamfer distance (1, √2) within `region` from the `sources` (multi-source Dijkstra).
+fn distance_within(
+    region: &[bool],
+    sources: &[usize],
+    width: usize,
+    height: usize,
+) -> Vec<f32> {
+    let mut dist = vec![f32::INFINITY; region.len()];
+    // Distances in 1/1024 px as integers keep the heap ordering total.
+    let mut heap: BinaryHeap<Reverse<(u32, u32)>> = BinaryHeap::new();
+    for &s in sources {
+        dist[s] = 0.0;
+        heap.push(Reverse((0, s as u32)));
+    }
+    const STRAIGHT: u32 = 1024;
+    const DIAGONAL: u32 = 1448;
+    while let Some(Reverse((d, i))) = heap.pop() {
+        let i = i as usize;
+        if (d as f32 / 1024.0) > dist[i] {
+            continue;
+        }
+        for j in neighbours8(i, width, height) {
+            if !region[j] {
+                continue;
+            }
+            let diagonal = (j % width != i % width) && (j / width != i / width);
+            let nd = d + if diagonal { DIAGONAL } else { STRAIGHT };
+            let ndf = nd as f32 / 1024.0;
+            if ndf < dist[j] {
+                dist[j] = ndf;
+                heap.push(Reverse((nd, j as u32)));
+            }
+        }
+    }
+    dist
+}
+
+/// Heavy-lasso seeds (§4.2; see the module documentation).
+pub fn heavy_lasso(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectError> {
+    check(mask, buffers)?;
+    let (w, h) = (buffers.width as usize, buffers.height as usize);
+    let n = w * h;
+    let band: Vec<bool> = mask.labels.iter().map(|&l| l == mask::HEAVY).collect();
+    if !band.iter().any(|&b| b) {
+        return Err(SelectError::EmptyStrokes(
+            "the heavy lasso needs one thick closed stroke (label 3) along the region's boundary"
+                .into(),
+        ));
+    }
+    let outside = outside_of(&band, w, h);
+    let inside: Vec<bool> = (0..n).map(|i| !band[i] && !outside[i]).collect();
+    if !inside.iter().any(|&b| b) {
+        return Err(SelectError::NotEnclosed);
+    }
+    let mut role = vec![UNKNOWN; n];
+    let (mut inner, mut outer) = (Vec::new(), Vec::new());
+    let (mut fg, mut bg) = (Vec::new(), Vec::new());
+    for i in 0..n {
+        if band[i] {
+            let mut touches_in = false;
+            let mut touches_out = false;
+            for j in neighbours8(i, w, h) {
+                touches_in |= inside[j];
+                touches_out |= outside[j];
+            }
+            // A band pixel at the image border borders the outside beyond the view.
+            let (x, y) = (i % w, i / w);
+            touches_out |= x == 0 || y == 0 || x + 1 == w || y + 1 == h;
+            match (touches_in, touches_out) {
+                (true, false) => {
+                    inner.push(i);
+                    role[i] = FG;
+                }
+                (false, true) => {
+                    outer.push(i);
+                    role[i] = BG;
+                }
+                _ => {}
+            }
+        } else {
+            role[i] = if inside[i] { FG } else { BG };
+        }
+    }
+    let mut any_surface = false;
+    for i in 0..n {
+        if !buffers.covered(i) {
+            role[i] = OFF;
+            continue;
+        }
+        any_surface |= band[i] || inside[i];
+    }
+    if !any_surface {
+        return Err(SelectError::EmptyStrokes(
+            "the heavy lasso encloses no surface of the model".into(),
+        ));
+    }
+    for &i in &inner {
+        if role[i] == FG {
+            fg.push(i as u32);
+        }
+    }
+    for &i in &outer {
+        if role[i] == BG {
+            bg.push(i as u32);
+        }
+    }
+    // Position across the band: d_in / (d_in + d_out), distances measured inside the band.
+    let d_in = distance_within(&band, &inner, w, h);
+    let d_out = distance_within(&band, &outer, w, h);
+    let position: Vec<f32> = (0..n)
+        .map(|i| {
+            if !band[i] {
+                return f32::NAN;
+            }
+            let (a, b) = (d_in[i], d_out[i]);
+            match (a.is_finite(), b.is_finite()) {
+                (true, true) if a + b > 0.0 => a / (a + b),
+                (true, false) => 0.0,
+                (false, true) => 1.0,
+                _ => 0.5,
+            }
+        })
+        .collect();
+    Ok(Seeds {
+        width: buffers.width,
+        height: buffers.height,
+        role,
+        fg_samples: fg,
+        bg_samples: bg,
+        band_position: Some(position),
+    })
+}
+
+/// The plain lasso: covered pixels inside the polygon (label 4).
+pub fn lasso(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Vec<bool>, SelectError> {
+    check(mask, buffers)?;
+    if !mask.labels.contains(&mask::LASSO) {
+        return Err(SelectError::EmptyStrokes(
+            "the lasso needs its polygon's inside filled with label 4".into(),
+        ));
+    }
+    let selected: Vec<bool> = (0..buffers.len())
+        .map(|i| mask.labels[i] == mask::LASSO && buffers.covered(i))
+        .collect();
+    if !selected.iter().any(|&s| s) {
+        return Err(SelectError::EmptyStrokes(
+            "the lasso encloses no surface of the model".into(),
+        ));
+    }
+    Ok(selected)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::select::buffers::OwnedBuffers;
+
+    /// A square ring of width `t` between squares [a, b) (outer) on a `size`² mask.
+    fn ring(size: u32, a: u32, b: u32, t: u32) -> StrokeMask {
+        let mut m = StrokeMask::empty(size, size).unwrap();
+        for y in a..b {
+            for x in a..b {
+                let inner = x >= a + t && x < b - t && y >= a + t && y < b - t;
+                if !inner {
+                    m.labels[(y * size + x) as usize] = mask::HEAVY;
+                }
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn heavy_lasso_seeds_the_inner_and_outer_edges() {
+        let b = OwnedBuffers::flat(40, 40);
+        let v = b.view();
+        let s = heavy_lasso(&ring(40, 10, 30, 6), &v).unwrap();
+        let at = |x: usize, y: usize| s.role[y * 40 + x];
+        // Inside and the inner marker: foreground; outside and the outer marker: background.
+        assert_eq!(at(20, 20), FG);
+        assert_eq!(at(15, 20), FG); // inner edge of the band (x = 10..16 is band)
+        assert_eq!(at(14, 20), UNKNOWN);
+        assert_eq!(at(11, 20), UNKNOWN);
+        assert_eq!(at(10, 20), BG); // outer edge of the band
+        assert_eq!(at(5, 5), BG);
+        // The markers run all around: 4 sides of the inner square (8 x 8) and the outer (20 x 20).
+        assert_eq!(s.fg_samples.len(), 8 * 4 + 4);
+        assert_eq!(s.bg_samples.len(), 20 * 4 - 4);
+        // Position across the band grows from the inner to the outer marker.
+        let p = s.band_position.as_ref().unwrap();
+        let pos = |x: usize| p[20 * 40 + x];
+        assert!(pos(15) < pos(13) && pos(13) < pos(11) && pos(11) < pos(10));
+        assert!((pos(15) - 0.0).abs() < 1e-6 && (pos(10) - 1.0).abs() < 1e-6);
+        assert!(pos(20).is_nan());
+    }
+
+    #[test]
+    fn heavy_lasso_needs_a_closed_loop() {
+        let b = OwnedBuffers::flat(40, 40);
+        let v = b.view();
+        let mut m = ring(40, 10, 30, 4);
+        // Cut the ring open.
+        for y in 10..14 {
+            for x in 18..22 {
+                m.labels[y * 40 + x] = mask::NONE;
+            }
+        }
+        assert_eq!(heavy_lasso(&m, &v), Err(SelectError::NotEnclosed));
+        let empty = StrokeMask::empty(40, 40).unwrap();
+        assert!(matches!(
+            heavy_lasso(&empty, &v),
+            Err(SelectError::EmptyStrokes(_))
+        ));
+        let small = StrokeMask::empty(20, 40).unwrap();
+        assert!(matches!(
+            heavy_lasso(&small, &v),
+            Err(SelectError::SizeMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn markup_needs_both_markers_on_the_surface() {
+        let mut b = OwnedBuffers::flat(10, 10);
+        for i in 50..100 {
+            b.node[i] = crate::render::NO_NODE;
+            b.depth[i] = f32::INFINITY;
+        }
+        let v = b.view();
+        let mut m = StrokeMask::empty(10, 10).unwrap();
+        m.labels[5] = mask::FOREGROUND;
+        assert!(matches!(markup(&m, &v), Err(SelectError::EmptyStrokes(_))));
+        m.labels[80] = mask::BACKGROUND; // off the model
+        let e = markup(&m, &v).unwrap_err().to_string();
+        assert!(e.contains("miss the model"), "{e}");
+        m.labels[30] = mask::BACKGROUND;
+        let s = markup(&m, &v).unwrap();
+        assert_eq!((s.role[5], s.role[30], s.role[80], s.role[6]), (FG, BG, OFF, UNKNOWN));
+    }
+
+    #[test]
+    fn lasso_keeps_covered_inside_pixels() {
+        let mut b = OwnedBuffers::flat(4, 1);
+        b.node[3] = crate::render::NO_NODE;
+        let v = b.view();
+        let m = StrokeMask::new(4, 1, vec![0, 4, 4, 4]).unwrap();
+        assert_eq!(lasso(&m, &v).unwrap(), vec![false, true, true, false]);
+        let m = StrokeMask::new(4, 1, vec![0, 0, 0, 4]).unwrap();
+        assert!(lasso(&m, &v).is_err());
+    }
+}

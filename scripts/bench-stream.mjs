@@ -1,0 +1,148 @@
+// Streaming bench: headless Chromium drives the viewer along a fixed camera path over a real
+// scan served by the real server, on an emulated network link, and prints time to first image,
+// time to 1 px quality, bytes transferred in total and per view, then the same path with a
+// fovea set on the close-up's surface point, against the size of the full-resolution model.
+// Figures are printed, never asserted. Usage: scripts/bench-stream [--mesh FILE] [--mbps N]
+
+import { statSync, existsSync } from 'node:fs';
+import { join } from 'node:path';
+
+import { SHARED_MESHES, sampleMesh } from '../tests/browser/support/env.mjs';
+import { ADMIN, importScan, startServer } from '../tests/browser/support/server.mjs';
+import { launch, login, poll, waitViewer } from '../tests/browser/support/browser.mjs';
+import { leafVertices, regionAt } from '../tests/browser/support/regions.mjs';
+
+const args = process.argv.slice(2);
+const opt = (name, dflt) => {
+  const i = args.indexOf(`--${name}`);
+  return i >= 0 ? args[i + 1] : dflt;
+};
+const MBPS = Number(opt('mbps', '16'));
+const LATENCY_MS = Number(opt('latency', '20'));
+const VIEW_TIMEOUT = 180_000;
+
+function pickMesh() {
+  const given = opt('mesh', null);
+  if (given) return { path: given, name: given.split('/').pop(), real: true };
+  for (const name of ['stanford_dragon_vrip_871k.ply', 'stanford_armadillo_346k.ply', 'igea_269k.ply']) {
+    const p = join(SHARED_MESHES, name);
+    if (existsSync(p)) return { path: p, name, real: true };
+  }
+  return sampleMesh('/tmp');
+}
+
+const add = (a, b) => a.map((v, k) => v + b[k]);
+const scale = (a, s) => a.map((v) => v * s);
+const round = (c) => ({ ...c, eye: c.eye.map((v) => Number(v.toPrecision(7))), target: c.target.map((v) => Number(v.toPrecision(7))) });
+
+/** The fixed path: whole model, an orbit, then closer and closer to a surface point, a pan. */
+function cameraPath(center, radius, p) {
+  const far = radius / Math.sin((20 * Math.PI) / 180) * 1.05;
+  const rot = (deg) => [Math.sin((deg * Math.PI) / 180), 0, Math.cos((deg * Math.PI) / 180)];
+  const toward = (d) => ({ eye: add(p, [0, 0.1 * d, d]), target: p, up: [0, 1, 0], fovy: 40 });
+  return [
+    { name: 'whole model', eye: add(center, scale(rot(0), far)), target: center, up: [0, 1, 0], fovy: 40 },
+    { name: 'orbit 50°', eye: add(center, scale(rot(50), far)), target: center, up: [0, 1, 0], fovy: 40 },
+    { name: 'approach', ...toward(1.0 * radius) },
+    { name: 'closer', ...toward(0.45 * radius) },
+    { name: 'close-up', ...toward(0.2 * radius) },
+    { name: 'pan', eye: add(toward(0.2 * radius).eye, [0.08 * radius, 0, 0]), target: add(p, [0.08 * radius, 0, 0]), up: [0, 1, 0], fovy: 40 },
+  ].map(round);
+}
+
+async function run(server, model, path, probe, fovea) {
+  const browser = await launch();
+  try {
+    const page = await browser.page();
+    await login(page, server.base, ADMIN);
+    const cdp = await page.context().newCDPSession(page);
+    await cdp.send('Network.enable');
+    await cdp.send('Network.setCacheDisabled', { cacheDisabled: true });
+    await cdp.send('Network.emulateNetworkConditions', { offline: false, latency: LATENCY_MS, downloadThroughput: (MBPS * 1e6) / 8, uploadThroughput: (MBPS * 1e6) / 8 });
+    const first = path[0];
+    const hash = `camera=${[...first.eye, ...first.target, ...first.up, first.fovy].join(',')}`;
+    const t0 = Date.now();
+    await page.goto(`${server.base}/models/${model.id}#${hash}`);
+    await waitViewer(page, () => true, VIEW_TIMEOUT);
+    await page.evaluate(({ probe, fovea }) => {
+      window.meshwikiViewer.setProbes([probe]);
+      if (fovea) window.meshwikiViewer.setFoveae([probe]);
+    }, { probe, fovea });
+    const rows = [];
+    let firstImage = null;
+    for (const [i, cam] of path.entries()) {
+      const frames0 = i === 0 ? 0 : (await page.evaluate(() => window.meshwikiViewer.stats())).frames;
+      const start = i === 0 ? t0 : Date.now();
+      if (i > 0) await page.evaluate((c) => window.meshwikiViewer.setCamera(c), cam);
+      const before = i === 0 ? 0 : rows[i - 1].bytesAfter;
+      let atFovea = null;
+      const done = await poll(page, () => window.meshwikiViewer?.stats(), (s) => {
+        if (!s || s.frames <= frames0 || s.drawn === 0) return false;
+        if (atFovea === null && s.foveaError <= 1.0001) atFovea = { ms: Date.now() - start, bytes: s.bytes - before };
+        return s.settled;
+      }, VIEW_TIMEOUT);
+      if (i === 0) firstImage = done.firstImageMs;
+      rows.push({
+        name: cam.name,
+        ms: Date.now() - start,
+        bytes: done.bytes - before,
+        bytesAfter: done.bytes,
+        triangles: done.triangles,
+        maxError: done.maxError,
+        foveaError: done.foveaError,
+        atFovea,
+      });
+    }
+    const stats = await page.evaluate(() => window.meshwikiViewer.stats());
+    return { rows, firstImage, navigationToFirstImage: firstImage, stats };
+  } finally {
+    await browser.close();
+  }
+}
+
+const mb = (b) => (b / 1e6).toFixed(2).padStart(7);
+
+async function main() {
+  const mesh = pickMesh();
+  const server = await startServer();
+  try {
+    const t = Date.now();
+    const model = await importScan(server.api, mesh.path, `bench ${mesh.name}`);
+    const importMs = Date.now() - t;
+    const lodPath = join(server.dataDir, model.lod_path);
+    const leaves = await leafVertices(lodPath);
+    const { table } = leaves;
+    const p = regionAt(leaves, [0, 0, 1], [0, 0, 0], 0.01).seed;
+    const path = cameraPath(table.center, table.radius, p);
+    console.log(`meshwiki bench stream: ${mesh.name} (${model.vertex_count} vertices, ${model.triangle_count} triangles), imported in ${(importMs / 1000).toFixed(1)} s`);
+    console.log(`  LOD: ${table.nodeCount} patches, ${table.levelCount} levels; link ${MBPS} Mbit/s, ${LATENCY_MS} ms latency (Chromium network emulation), headless, software GL`);
+    console.log(`  full resolution: scan file ${mb(statSync(mesh.path).size)} MB, full-resolution patches ${mb(table.leafBytes)} MB, whole LOD file ${mb(table.fileBytes)} MB`);
+    const plain = await run(server, model, path, p, false);
+    const foveated = await run(server, model, path, p, true);
+    for (const [label, r] of [['without fovea', plain], ['with a fovea on the close-up point', foveated]]) {
+      console.log(`\n  ${label}: first image ${Math.round(r.firstImage)} ms after navigation start (tables ${r.stats.tableBytes} bytes)`);
+      console.log(`    view           settled in    bytes (MB)  triangles  max err px   point at 1 px after: time, MB`);
+      for (const row of r.rows) {
+        const fov = row.atFovea ? `${String(row.atFovea.ms).padStart(8)} ms ${mb(row.atFovea.bytes)}` : '   (not reached)';
+        console.log(`    ${row.name.padEnd(14)} ${String(row.ms).padStart(8)} ms  ${mb(row.bytes)}   ${String(row.triangles).padStart(9)}  ${row.maxError.toFixed(2).padStart(9)}   ${fov}`);
+      }
+      const total = r.rows.reduce((s, x) => s + x.bytes, 0);
+      const time = r.rows.reduce((s, x) => s + x.ms, 0);
+      console.log(`    total          ${String(time).padStart(8)} ms  ${mb(total)}   = ${((100 * total) / table.leafBytes).toFixed(1)}% of the full-resolution patches, ${((100 * total) / statSync(mesh.path).size).toFixed(1)}% of the scan file`);
+    }
+    const plainTotal = plain.rows.reduce((s, x) => s + x.bytes, 0);
+    const fovTotal = foveated.rows.reduce((s, x) => s + x.bytes, 0);
+    const closeUp = 4;
+    const plainClose = plain.rows.slice(0, closeUp).reduce((s, x) => s + x.bytes, 0) + (plain.rows[closeUp].atFovea?.bytes ?? plain.rows[closeUp].bytes);
+    const fovClose = foveated.rows.slice(0, closeUp).reduce((s, x) => s + x.bytes, 0) + (foveated.rows[closeUp].atFovea?.bytes ?? foveated.rows[closeUp].bytes);
+    console.log(`\n  bytes until the close-up shows the fovea point at 1 px (path so far): ${mb(plainClose)} MB without a fovea, ${mb(fovClose)} MB with it (${((100 * fovClose) / plainClose).toFixed(0)}%)`);
+    console.log(`  whole path: ${mb(plainTotal)} MB without, ${mb(fovTotal)} MB with the fovea (${((100 * fovTotal) / plainTotal).toFixed(0)}%)`);
+  } finally {
+    await server.stop();
+  }
+}
+
+main().catch((e) => {
+  console.error(e);
+  process.exit(1);
+});

@@ -1,0 +1,434 @@
+//! The real system, driven from outside: this binary's own `user add`, `import` and `serve`
+//! subcommands on a scratch data directory, then HTTP to the server (as the viewer and the
+//! tests do: session login with its CSRF token, selections as multipart `request` + `mask`,
+//! render buffers in the `MWRB` layout of `src/web/render.rs`).
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+use meshwiki_engine::camera::Camera;
+use roaring::RoaringBitmap;
+use serde_json::{Value, json};
+
+/// Log filter of the spawned processes (their output goes to a log file).
+fn log_filter() -> String {
+    std::env::var("MESHWIKI_LOG").unwrap_or_else(|_| "warn".into())
+}
+
+fn log_file(path: &Path) -> Result<std::fs::File> {
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))
+}
+
+/// The last lines of the log, for error messages.
+pub fn log_tail(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(15)..].join("\n")
+}
+
+/// This binary's subcommands on one data directory.
+#[derive(Debug, Clone)]
+pub struct Meshwiki {
+    pub exe: PathBuf,
+    pub data_dir: PathBuf,
+    pub log: PathBuf,
+}
+
+impl Meshwiki {
+    fn command(&self, args: &[&str]) -> Result<Command> {
+        let mut c = Command::new(&self.exe);
+        c.args(args)
+            .arg("--data-dir")
+            .arg(&self.data_dir)
+            .env("MESHWIKI_LOG", log_filter())
+            .stderr(log_file(&self.log)?);
+        Ok(c)
+    }
+
+    /// `user add NAME --role admin`, the password on standard input.
+    pub fn add_admin(&self, name: &str, password: &str) -> Result<()> {
+        let mut child = self
+            .command(&["user", "add", name, "--role", "admin"])?
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .context("running meshwiki user add")?;
+        if let Some(mut stdin) = child.stdin.take() {
+            // A closed pipe means the command failed early: its status says why.
+            let _ = stdin.write_all(format!("{password}\n").as_bytes());
+        }
+        let status = child.wait().context("waiting for meshwiki user add")?;
+        if !status.success() {
+            bail!("meshwiki user add failed:\n{}", log_tail(&self.log));
+        }
+        Ok(())
+    }
+
+    /// `import FILE --title T`: builds the model through the real pipeline; returns its id.
+    pub fn import(&self, file: &Path, title: &str) -> Result<i64> {
+        let file = file.to_string_lossy();
+        let out = self
+            .command(&["import", &*file, "--title", title])?
+            .stdin(Stdio::null())
+            .output()
+            .context("running meshwiki import")?;
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        if !out.status.success() {
+            bail!("meshwiki import {file} failed:\n{}", log_tail(&self.log));
+        }
+        stdout
+            .lines()
+            .find_map(|l| {
+                let rest = l.split(" as model ").nth(1)?;
+                rest.split_whitespace().next()?.parse().ok()
+            })
+            .with_context(|| format!("meshwiki import printed no model id: {stdout}"))
+    }
+
+    /// `serve --bind 127.0.0.1:0`, waiting until it listens.
+    pub fn serve(&self) -> Result<Server> {
+        let mut child = self
+            .command(&["serve", "--bind", "127.0.0.1:0", "--workers", "2"])?
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .spawn()
+            .context("running meshwiki serve")?;
+        let stdout = child.stdout.take().context("server output")?;
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut tx = Some(tx);
+            for line in BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if let Some(addr) = line.strip_prefix("meshwiki listening on ")
+                    && let Some(tx) = tx.take()
+                {
+                    let _ = tx.send(addr.trim().to_string());
+                }
+            }
+        });
+        let server = Server { child };
+        match rx.recv_timeout(Duration::from_secs(120)) {
+            Ok(base) => Ok(server.with_base(base)),
+            Err(_) => bail!(
+                "the server did not start within 120 s:\n{}",
+                log_tail(&self.log)
+            ),
+        }
+    }
+}
+
+/// A running server, stopped on drop.
+#[derive(Debug)]
+pub struct Server {
+    child: Child,
+}
+
+/// A running server and its address.
+#[derive(Debug)]
+pub struct Running {
+    /// Kept for its drop, which stops the server.
+    _server: Server,
+    pub base: String,
+}
+
+impl Server {
+    fn with_base(self, base: String) -> Running {
+        let base = if base.starts_with("http://") {
+            base
+        } else {
+            format!("http://{base}")
+        };
+        Running {
+            _server: self,
+            base,
+        }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A logged-in API client.
+pub struct Api {
+    agent: ureq::Agent,
+    base: String,
+    cookie: String,
+    csrf: String,
+}
+
+/// A response: status and body.
+struct Resp {
+    status: u16,
+    retry_after: Option<u64>,
+    body: Vec<u8>,
+}
+
+impl Resp {
+    fn text(&self) -> String {
+        let t = String::from_utf8_lossy(&self.body);
+        serde_json::from_str::<Value>(&t)
+            .ok()
+            .and_then(|v| v["error"].as_str().map(str::to_string))
+            .unwrap_or_else(|| t.chars().take(300).collect())
+    }
+}
+
+/// A selection draft the server made.
+#[derive(Debug, Clone)]
+pub struct Draft {
+    pub id: String,
+    pub vertex_count: u64,
+    /// Wall time of the POST (strokes in, draft out), milliseconds.
+    pub latency_ms: f64,
+    /// The server's own total.
+    pub server_ms: f64,
+}
+
+/// The camera of a request, as the selection API takes it.
+pub fn camera_json(c: &Camera) -> Value {
+    json!({"eye": c.eye.to_array(), "target": c.target.to_array(), "up": c.up.to_array(),
+           "fovy": c.fovy_deg, "width": c.width, "height": c.height})
+}
+
+fn vec3(v: Vec3) -> String {
+    format!("{},{},{}", v.x, v.y, v.z)
+}
+
+impl Api {
+    /// Logs in as `user` (`POST /api/v1/session`).
+    pub fn login(base: &str, user: &str, password: &str) -> Result<Api> {
+        let config = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .max_redirects(0)
+            .timeout_global(Some(Duration::from_secs(300)))
+            .build();
+        let mut api = Api {
+            agent: ureq::Agent::new_with_config(config),
+            base: base.to_string(),
+            cookie: String::new(),
+            csrf: String::new(),
+        };
+        let body = json!({"username": user, "password": password}).to_string();
+        let req = ureq::http::Request::builder()
+            .method("POST")
+            .uri(format!("{base}/api/v1/session"))
+            .header("Content-Type", "application/json")
+            .body(body.into_bytes())?;
+        let resp = api.agent.run(req).context("POST /api/v1/session")?;
+        let status = resp.status().as_u16();
+        let cookie = resp
+            .headers()
+            .get_all("set-cookie")
+            .iter()
+            .filter_map(|v| v.to_str().ok())
+            .find(|v| v.starts_with("meshwiki_session="))
+            .map(|v| v.split(';').next().unwrap_or("").to_string());
+        let body = resp.into_body().read_to_vec()?;
+        if status != 200 {
+            bail!("login failed ({status}): {}", String::from_utf8_lossy(&body));
+        }
+        let v: Value = serde_json::from_slice(&body).context("login answer")?;
+        api.csrf = v["csrf_token"]
+            .as_str()
+            .context("no csrf_token in the login answer")?
+            .to_string();
+        api.cookie = cookie.context("no session cookie in the login answer")?;
+        Ok(api)
+    }
+
+    fn send(&self, method: &str, path: &str, ct: Option<&str>, body: Vec<u8>) -> Result<Resp> {
+        // A full render queue answers 503 with Retry-After: wait and retry a few times.
+        let mut attempt = 0;
+        loop {
+            let mut b = ureq::http::Request::builder()
+                .method(method)
+                .uri(format!("{}{path}", self.base))
+                .header("Cookie", self.cookie.as_str())
+                .header("X-CSRF-Token", self.csrf.as_str());
+            if let Some(ct) = ct {
+                b = b.header("Content-Type", ct);
+            }
+            let resp = self
+                .agent
+                .run(b.body(body.clone())?)
+                .with_context(|| format!("{method} {path}"))?;
+            let status = resp.status().as_u16();
+            let retry_after = resp
+                .headers()
+                .get("retry-after")
+                .and_then(|v| v.to_str().ok())
+                .and_then(|v| v.parse().ok());
+            let body = resp
+                .into_body()
+                .with_config()
+                .limit(512 << 20)
+                .read_to_vec()
+                .with_context(|| format!("{method} {path}: reading the answer"))?;
+            let r = Resp {
+                status,
+                retry_after,
+                body,
+            };
+            if let (503, Some(wait)) = (r.status, r.retry_after)
+                && attempt < 5
+            {
+                attempt += 1;
+                std::thread::sleep(Duration::from_secs(wait.clamp(1, 10)));
+                continue;
+            }
+            return Ok(r);
+        }
+    }
+
+    /// Per pixel, the original vertex id drawn there (`u32::MAX` on the background), from
+    /// `GET /api/v1/models/{id}/render/buffers?buffers=ids`.
+    pub fn vertex_ids(&self, model: i64, c: &Camera) -> Result<Vec<u32>> {
+        let path = format!(
+            "/api/v1/models/{model}/render/buffers?eye={}&target={}&up={}&fovy={}&w={}&h={}&buffers=ids",
+            vec3(c.eye),
+            vec3(c.target),
+            vec3(c.up),
+            c.fovy_deg,
+            c.width,
+            c.height
+        );
+        let r = self.send("GET", &path, None, Vec::new())?;
+        if r.status != 200 {
+            bail!("GET {path}: {} {}", r.status, r.text());
+        }
+        parse_vertex_buffer(&r.body, c.width as usize * c.height as usize)
+    }
+
+    /// `POST /api/v1/models/{id}/selections` with `tool` and the stroke mask PNG. `Ok(Err)`
+    /// is the server's refusal (a 4xx and its message).
+    pub fn select(
+        &self,
+        model: i64,
+        tool: &str,
+        camera: &Camera,
+        mask_png: &[u8],
+    ) -> Result<std::result::Result<Draft, String>> {
+        let boundary = "----meshwikibenchselect4b1d";
+        let request = json!({"tool": tool, "camera": camera_json(camera)});
+        let mut body = format!(
+            "--{boundary}\r\nContent-Disposition: form-data; name=\"request\"\r\n\
+             Content-Type: application/json\r\n\r\n{request}\r\n--{boundary}\r\n\
+             Content-Disposition: form-data; name=\"mask\"; filename=\"mask.png\"\r\n\
+             Content-Type: image/png\r\n\r\n"
+        )
+        .into_bytes();
+        body.extend_from_slice(mask_png);
+        body.extend_from_slice(format!("\r\n--{boundary}--\r\n").as_bytes());
+        let path = format!("/api/v1/models/{model}/selections");
+        let started = Instant::now();
+        let r = self.send(
+            "POST",
+            &path,
+            Some(&format!("multipart/form-data; boundary={boundary}")),
+            body,
+        )?;
+        let latency_ms = started.elapsed().as_secs_f64() * 1e3;
+        match r.status {
+            201 => {
+                let v: Value = serde_json::from_slice(&r.body).context("selection answer")?;
+                Ok(Ok(Draft {
+                    id: v["id"].as_str().context("no draft id")?.to_string(),
+                    vertex_count: v["vertex_count"].as_u64().unwrap_or(0),
+                    latency_ms,
+                    server_ms: v["timings_ms"]["total"].as_f64().unwrap_or(f64::NAN),
+                }))
+            }
+            400..=499 => Ok(Err(format!("{}: {}", r.status, r.text()))),
+            s => bail!("POST {path}: {s} {}", r.text()),
+        }
+    }
+
+    /// The draft's vertex set (`GET /api/v1/selections/{draft}/vertices`), then discards it.
+    pub fn take_vertices(&self, draft: &str) -> Result<RoaringBitmap> {
+        let path = format!("/api/v1/selections/{draft}/vertices");
+        let r = self.send("GET", &path, None, Vec::new())?;
+        if r.status != 200 {
+            bail!("GET {path}: {} {}", r.status, r.text());
+        }
+        let set = RoaringBitmap::deserialize_from(&r.body[..])
+            .with_context(|| format!("GET {path}: not a serialised RoaringBitmap"))?;
+        let path = format!("/api/v1/selections/{draft}");
+        let r = self.send("DELETE", &path, None, Vec::new())?;
+        if r.status != 204 {
+            tracing::warn!(status = r.status, "DELETE {path}: {}", r.text());
+        }
+        Ok(set)
+    }
+}
+
+fn u32_at(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+}
+
+/// The `vertex` array of a render buffers body (`MWRB`, version 1).
+pub fn parse_vertex_buffer(body: &[u8], pixels: usize) -> Result<Vec<u32>> {
+    if body.get(0..4) != Some(b"MWRB") || u32_at(body, 4) != Some(1) {
+        bail!("the render buffers answer is not MWRB version 1");
+    }
+    let len = u32_at(body, 8).context("truncated buffers header")? as usize;
+    let header = body
+        .get(12..12 + len)
+        .context("truncated buffers header")?;
+    let header: Value = serde_json::from_slice(header).context("buffers header")?;
+    let entry = header["buffers"]
+        .as_array()
+        .and_then(|l| l.iter().find(|e| e["name"] == "vertex"))
+        .context("no vertex buffer in the answer")?;
+    let offset = entry["offset"].as_u64().context("vertex buffer offset")? as usize;
+    let bytes = entry["bytes"].as_u64().context("vertex buffer size")? as usize;
+    if bytes != pixels * 4 {
+        bail!("the vertex buffer has {bytes} bytes for {pixels} pixels");
+    }
+    let data = body
+        .get(offset..offset + bytes)
+        .context("truncated vertex buffer")?;
+    Ok(data
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vertex_buffer_layout() {
+        let header = json!({"buffers": [
+            {"name": "node", "type": "u32", "components": 1, "offset": 1000, "bytes": 8},
+            {"name": "vertex", "type": "u32", "components": 1, "offset": 1008, "bytes": 8}]})
+        .to_string();
+        let mut body = b"MWRB".to_vec();
+        body.extend_from_slice(&1u32.to_le_bytes());
+        let padded = header.len().div_ceil(4) * 4;
+        body.extend_from_slice(&(padded as u32).to_le_bytes());
+        body.extend_from_slice(header.as_bytes());
+        body.resize(12 + padded, b' ');
+        body.resize(1008, 0);
+        body.extend_from_slice(&7u32.to_le_bytes());
+        body.extend_from_slice(&u32::MAX.to_le_bytes());
+        // The fixture's offsets assume a header that fits before byte 1000.
+        assert!(12 + padded <= 1000);
+        assert_eq!(parse_vertex_buffer(&body, 2).unwrap(), vec![7, u32::MAX]);
+        assert!(parse_vertex_buffer(&body, 3).is_err());
+        assert!(parse_vertex_buffer(b"MWRX", 2).is_err());
+    }
+}

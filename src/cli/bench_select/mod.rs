@@ -1,0 +1,355 @@
+//! `meshwiki bench select`: the selection tools against human ground truth (issue 6; system
+//! paper §4.1–4.2 for the tools, §4.3 for the measure: mis-selected vertices over the
+//! region's vertices). Figures are printed, never asserted.
+//!
+//! On the Princeton segmentation benchmark ([`psb`]) it runs the real system: a scratch data
+//! directory, every chosen OFF model imported by this binary's `import` (the real LOD
+//! pipeline), the real server started on an ephemeral port, an admin logged in over HTTP
+//! ([`client`]). For each region of each model's first human segmentation ([`eval`]): a
+//! camera framing it (centroid, mean normal, extent, the most visible of a few directions),
+//! its visible ground truth (the vertices a lasso over the whole view selects, within the
+//! region) and its on-screen mask (the render API's id buffer); then simulated users
+//! ([`strokes`]) draw a heavy lasso, a markup and a plain lasso with the same jitter, each
+//! submitted to `POST /api/v1/models/{id}/selections`, the draft's vertices fetched and
+//! compared. The exact on-screen mask, submitted as a lasso, is the reference (the floor of
+//! back-projection). Prints, per tool, mean and p90 error and the POST's p50/p95 latency.
+
+mod client;
+mod eval;
+mod psb;
+mod strokes;
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use clap::Args as ClapArgs;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde_json::json;
+
+use client::{Api, Meshwiki};
+use eval::{RegionResult, Skip, TOOLS};
+use strokes::UserModel;
+
+/// Default location of the benchmark, relative to the repository root.
+const DEFAULT_PSB: &str = "../shared/data/psb";
+/// Regions under this share of a model's vertices are left out.
+const MIN_REGION_SHARE: f64 = 0.01;
+
+/// Options of `bench select`.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct Args {
+    /// The benchmark: a folder with MeshsegBenchmark-1.0_data.tar.zst or off/ and seg/, or
+    /// the archive itself.
+    #[arg(long, default_value = DEFAULT_PSB)]
+    pub psb: PathBuf,
+    /// Models, spread over the categories.
+    #[arg(long, default_value_t = 8)]
+    pub models: usize,
+    /// Amplitude of the strokes' smooth jitter, pixels.
+    #[arg(long, default_value_t = 3.0)]
+    pub jitter: f32,
+    /// Width of the heavy lasso's band, pixels.
+    #[arg(long, default_value_t = 12.0)]
+    pub band: f32,
+    /// Seed of the simulated users.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// View width, pixels.
+    #[arg(long, default_value_t = 1280)]
+    pub width: u32,
+    /// View height, pixels.
+    #[arg(long, default_value_t = 720)]
+    pub height: u32,
+    /// Write every figure here as JSON.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Scratch directory removed on drop.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn bar(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {prefix:>8} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_prefix(what.to_string());
+    bar.enable_steady_tick(Duration::from_millis(200));
+    bar
+}
+
+fn percentile(values: &[f64], p: f64) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[(((v.len() - 1) as f64) * p).round() as usize]
+}
+
+fn mean(values: &[f64]) -> f64 {
+    if values.is_empty() {
+        f64::NAN
+    } else {
+        values.iter().sum::<f64>() / values.len() as f64
+    }
+}
+
+fn check(args: &Args) -> Result<()> {
+    if args.models == 0 {
+        bail!("--models must be at least 1");
+    }
+    if !(0.0..=50.0).contains(&args.jitter) {
+        bail!("--jitter must be within 0 to 50 pixels");
+    }
+    if !(2.0..=200.0).contains(&args.band) {
+        bail!("--band must be within 2 to 200 pixels");
+    }
+    if !(64..=4096).contains(&args.width) || !(64..=4096).contains(&args.height) {
+        bail!("--width and --height must be within 64 to 4096 pixels");
+    }
+    Ok(())
+}
+
+/// One imported model.
+struct Model {
+    psb_id: u32,
+    model_id: i64,
+    seg: psb::Segmentation,
+    faces: usize,
+}
+
+/// Runs the benchmark (blocking: it drives subprocesses and HTTP).
+pub fn run(args: Args) -> Result<()> {
+    check(&args)?;
+    let started = Instant::now();
+    let data = psb::Psb::open(&args.psb)?;
+    let ids = data.pick(args.models);
+    if ids.len() < args.models {
+        eprintln!(
+            "note: only {} of the {} models asked for are in {} ({} available)",
+            ids.len(),
+            args.models,
+            args.psb.display(),
+            data.models_available()
+        );
+    }
+    let exe = std::env::current_exe().context("locating this executable")?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let scratch = Scratch(std::env::temp_dir().join(format!(
+        "meshwiki-bench-select-{}-{stamp}",
+        std::process::id()
+    )));
+    let data_dir = scratch.0.join("data");
+    std::fs::create_dir_all(&data_dir)
+        .with_context(|| format!("creating {}", data_dir.display()))?;
+    let mw = Meshwiki {
+        exe,
+        data_dir,
+        log: scratch.0.join("meshwiki.log"),
+    };
+    let password = format!("bench-{:016x}", stamp as u64 ^ 0x5eed_5eed);
+    mw.add_admin("bench", &password)?;
+
+    // Ground truth and imports.
+    let files = data.files(&ids, &scratch.0.join("psb"))?;
+    let imports = bar(ids.len() as u64, "import");
+    let mut models = Vec::new();
+    for (&id, (off, seg)) in ids.iter().zip(&files) {
+        let category = psb::category(id);
+        imports.set_message(format!("{id} ({category})"));
+        let mesh = psb::read_off(off)?;
+        let labels = psb::read_seg(seg, mesh.faces)?;
+        let segmentation = psb::segment(&mesh, &labels, MIN_REGION_SHARE);
+        let t = Instant::now();
+        let model_id = mw.import(off, &format!("PSB {id} ({category})"))?;
+        tracing::info!(
+            psb = id,
+            model_id,
+            faces = mesh.faces,
+            regions = segmentation.regions.len(),
+            seconds = t.elapsed().as_secs_f64(),
+            "imported"
+        );
+        models.push(Model {
+            psb_id: id,
+            model_id,
+            seg: segmentation,
+            faces: mesh.faces,
+        });
+        imports.inc(1);
+    }
+    imports.finish_and_clear();
+    let import_s = started.elapsed().as_secs_f64();
+
+    let running = mw.serve()?;
+    let api = Api::login(&running.base, "bench", &password)?;
+    tracing::info!(base = %running.base, "server started");
+    let user = UserModel {
+        jitter: args.jitter,
+        band: args.band,
+    };
+    let total: usize = models.iter().map(|m| m.seg.regions.len()).sum();
+    let regions_bar = bar(total as u64, "select");
+    let eval_started = Instant::now();
+    let mut results: Vec<RegionResult> = Vec::new();
+    let mut skipped = Vec::new();
+    for m in &models {
+        for region in &m.seg.regions {
+            regions_bar.set_message(format!(
+                "{} ({}) segment {}",
+                m.psb_id,
+                psb::category(m.psb_id),
+                region.segment
+            ));
+            let case = eval::Case {
+                api: &api,
+                model_id: m.model_id,
+                psb_id: m.psb_id,
+                seg: &m.seg,
+                region,
+                width: args.width,
+                height: args.height,
+                user,
+                seed: args.seed,
+            };
+            let outcome = eval::region(&case).with_context(|| {
+                format!(
+                    "model {} segment {} (server log: {})",
+                    m.psb_id,
+                    region.segment,
+                    client::log_tail(&mw.log)
+                )
+            })?;
+            match outcome {
+                Ok(r) => results.push(r),
+                Err(s) => skipped.push((m.psb_id, region.segment, s)),
+            }
+            regions_bar.inc(1);
+        }
+    }
+    regions_bar.finish_and_clear();
+    let eval_s = eval_started.elapsed().as_secs_f64();
+    drop(running);
+
+    let summary = report(&args, &models, &results, &skipped, import_s, eval_s);
+    println!("  total time   {:.1} s", started.elapsed().as_secs_f64());
+    if let Some(out) = &args.out {
+        let doc = json!({
+            "settings": {"psb": args.psb, "models": ids, "jitter_px": args.jitter,
+                          "band_px": args.band, "seed": args.seed, "width": args.width,
+                          "height": args.height, "min_region_share": MIN_REGION_SHARE,
+                          "min_pixels": eval::MIN_PIXELS},
+            "summary": summary,
+            "regions": results,
+            "skipped": skipped.iter().map(|(m, s, why)| json!({"model": m, "segment": s, "why": why}))
+                .collect::<Vec<_>>(),
+            "seconds": {"import": import_s, "evaluate": eval_s,
+                         "total": started.elapsed().as_secs_f64()},
+        });
+        write_json(out, &doc)?;
+        println!("  figures      {}", out.display());
+    }
+    Ok(())
+}
+
+/// Writes `doc` to a temporary name beside `path`, then renames it.
+fn write_json(path: &Path, doc: &serde_json::Value) -> Result<()> {
+    let tmp = path.with_extension("json.tmp");
+    let text = serde_json::to_string_pretty(doc)?;
+    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))?;
+    Ok(())
+}
+
+/// Prints the figures; returns them as JSON.
+fn report(
+    args: &Args,
+    models: &[Model],
+    results: &[RegionResult],
+    skipped: &[(u32, u32, Skip)],
+    import_s: f64,
+    eval_s: f64,
+) -> serde_json::Value {
+    let names: Vec<String> = models
+        .iter()
+        .map(|m| format!("{} {} ({} faces)", psb::category(m.psb_id), m.psb_id, m.faces))
+        .collect();
+    let tiny: usize = models.iter().map(|m| m.seg.tiny).sum();
+    println!(
+        "bench select: {} models, {} regions evaluated ({} barely visible, {} under {:.0} % of \
+         the vertices left out); {}x{}, jitter {} px, heavy band {} px, seed {}",
+        models.len(),
+        results.len(),
+        skipped.len(),
+        tiny,
+        MIN_REGION_SHARE * 100.0,
+        args.width,
+        args.height,
+        args.jitter,
+        args.band,
+        args.seed
+    );
+    println!("  models       {}", names.join(", "));
+    println!(
+        "  error = |selected Δ visible truth| / |visible truth| (vertices); latency = POST \
+         /selections wall time"
+    );
+    println!(
+        "  {:<18} {:>7} {:>9} {:>9} {:>9} {:>8} {:>12} {:>12}",
+        "tool", "regions", "mean err", "p50 err", "p90 err", "refused", "latency p50", "latency p95"
+    );
+    let mut summary = serde_json::Map::new();
+    for (k, (name, label)) in TOOLS.iter().enumerate() {
+        let errors: Vec<f64> = results.iter().map(|r| r.tools[k].error).collect();
+        let latency: Vec<f64> = results.iter().filter_map(|r| r.tools[k].latency_ms).collect();
+        let refused = results.iter().filter(|r| r.tools[k].refused.is_some()).count();
+        let (m, p50, p90) = (mean(&errors), percentile(&errors, 0.5), percentile(&errors, 0.9));
+        let (l50, l95) = (percentile(&latency, 0.5), percentile(&latency, 0.95));
+        println!(
+            "  {:<18} {:>7} {:>8.2}% {:>8.2}% {:>8.2}% {:>8} {:>9.0} ms {:>9.0} ms",
+            label,
+            errors.len(),
+            m * 100.0,
+            p50 * 100.0,
+            p90 * 100.0,
+            refused,
+            l50,
+            l95
+        );
+        summary.insert(
+            name.to_string(),
+            json!({"regions": errors.len(), "mean_error": m, "p50_error": p50, "p90_error": p90,
+                   "refused": refused, "latency_p50_ms": l50, "latency_p95_ms": l95}),
+        );
+    }
+    let wins = results
+        .iter()
+        .filter(|r| r.tools[0].error < r.tools[2].error)
+        .count();
+    let ties = results
+        .iter()
+        .filter(|r| r.tools[0].error == r.tools[2].error)
+        .count();
+    println!(
+        "  heavy lasso better than lasso on {wins} of {} regions ({ties} ties)",
+        results.len()
+    );
+    println!("  time         imports {import_s:.1} s, selections {eval_s:.1} s");
+    summary.insert(
+        "heavy_lasso_beats_lasso".into(),
+        json!({"wins": wins, "ties": ties, "regions": results.len()}),
+    );
+    serde_json::Value::Object(summary)
+}

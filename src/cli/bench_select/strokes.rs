@@ -1,0 +1,494 @@
+//! Simulated users of the three selection tools (system paper §4.2 and §4.3's usability
+//! study, replayed by a program): from the on-screen mask of a ground-truth region they draw
+//!
+//! - a **heavy lasso**: a band of fixed width centred on the region's outline, displaced by a
+//!   smooth random jitter (the hand's wobble);
+//! - a **lasso**: the polygon following the same jittered outline, its inside filled;
+//! - a **markup**: a few foreground strokes well inside the region and a few background
+//!   strokes on the surface around it (Lazy Snapping's markers), kept away from the outline.
+//!
+//! The outline is the zero level of the region's signed distance field; the jitter is a sum of
+//! plane waves (wavelengths 60–240 px), so the outline is displaced along its normal by a
+//! smooth function of position whose RMS is `jitter / √2` — a sine of amplitude `jitter`.
+//! The lasso and the heavy lasso of a region share one jitter, so their errors are paired.
+//! Everything is deterministic given the seed.
+
+use meshwiki_engine::select::mask;
+
+/// SplitMix64: a small, seedable, deterministic generator.
+#[derive(Debug, Clone)]
+pub struct Rng(u64);
+
+impl Rng {
+    /// A generator for `seed` and a stream number (a region, a tool).
+    pub fn new(seed: u64, stream: u64) -> Rng {
+        let mut r = Rng(seed ^ stream.wrapping_mul(0xA24B_AED4_963E_E407));
+        r.next_u64();
+        r
+    }
+
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in `[a, b)`.
+    pub fn range(&mut self, a: f32, b: f32) -> f32 {
+        a + (b - a) * self.unit()
+    }
+
+    /// Uniform index below `n` (`n > 0`).
+    pub fn index(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+}
+
+/// A smooth random displacement field over the image.
+#[derive(Debug, Clone)]
+pub struct Jitter {
+    /// `(kx, ky, phase)` of each plane wave.
+    waves: Vec<(f32, f32, f32)>,
+    scale: f32,
+}
+
+impl Jitter {
+    /// Plane waves of the hand's wobble.
+    const WAVES: usize = 8;
+
+    /// A field of amplitude `amplitude` pixels (0: no jitter).
+    pub fn new(rng: &mut Rng, amplitude: f32) -> Jitter {
+        let waves = (0..Self::WAVES)
+            .map(|_| {
+                let lambda = rng.range(60.0, 240.0);
+                let angle = rng.range(0.0, std::f32::consts::TAU);
+                let k = std::f32::consts::TAU / lambda;
+                (
+                    k * angle.cos(),
+                    k * angle.sin(),
+                    rng.range(0.0, std::f32::consts::TAU),
+                )
+            })
+            .collect();
+        Jitter {
+            waves,
+            scale: amplitude / (Self::WAVES as f32).sqrt(),
+        }
+    }
+
+    /// Displacement at pixel centre `(x, y)`, in pixels.
+    pub fn at(&self, x: f32, y: f32) -> f32 {
+        self.scale
+            * self
+                .waves
+                .iter()
+                .map(|&(kx, ky, p)| (kx * x + ky * y + p).sin())
+                .sum::<f32>()
+    }
+}
+
+/// One-dimensional squared distance transform (Felzenszwalb & Huttenlocher 2012): the lower
+/// envelope of the parabolas rooted at the finite samples of `f`.
+fn edt_1d(f: &[f64], out: &mut [f64], v: &mut [usize], z: &mut [f64]) {
+    let mut k: Option<usize> = None;
+    for (q, &fq) in f.iter().enumerate() {
+        if !fq.is_finite() {
+            continue;
+        }
+        loop {
+            let Some(top) = k else {
+                k = Some(0);
+                v[0] = q;
+                z[0] = f64::NEG_INFINITY;
+                z[1] = f64::INFINITY;
+                break;
+            };
+            let p = v[top];
+            let s = ((fq + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64);
+            if s <= z[top] {
+                k = top.checked_sub(1);
+                continue;
+            }
+            v[top + 1] = q;
+            z[top + 1] = s;
+            z[top + 2] = f64::INFINITY;
+            k = Some(top + 1);
+            break;
+        }
+    }
+    if k.is_none() {
+        out.fill(f64::INFINITY);
+        return;
+    }
+    let mut j = 0;
+    for (q, o) in out.iter_mut().enumerate() {
+        while z[j + 1] < q as f64 {
+            j += 1;
+        }
+        let d = q as f64 - v[j] as f64;
+        *o = d * d + f[v[j]];
+    }
+}
+
+/// Squared Euclidean distance from every pixel to the nearest pixel where `feature` holds
+/// (infinite when there is none).
+pub fn distance_sq(feature: &[bool], w: usize, h: usize) -> Vec<f32> {
+    let mut d: Vec<f64> = feature
+        .iter()
+        .map(|&f| if f { 0.0 } else { f64::INFINITY })
+        .collect();
+    let n = w.max(h);
+    let (mut f, mut out) = (vec![0f64; n], vec![0f64; n]);
+    let (mut v, mut z) = (vec![0usize; n + 1], vec![0f64; n + 2]);
+    for x in 0..w {
+        for y in 0..h {
+            f[y] = d[y * w + x];
+        }
+        edt_1d(&f[..h], &mut out[..h], &mut v, &mut z);
+        for y in 0..h {
+            d[y * w + x] = out[y];
+        }
+    }
+    for y in 0..h {
+        f[..w].copy_from_slice(&d[y * w..(y + 1) * w]);
+        edt_1d(&f[..w], &mut out[..w], &mut v, &mut z);
+        d[y * w..(y + 1) * w].copy_from_slice(&out[..w]);
+    }
+    d.into_iter().map(|x| x as f32).collect()
+}
+
+/// Signed distance to the outline of `inside`: positive inside, negative outside, the
+/// outline (between pixel centres) at 0.
+pub fn signed_distance(inside: &[bool], w: usize, h: usize) -> Vec<f32> {
+    let outside: Vec<bool> = inside.iter().map(|&b| !b).collect();
+    let to_out = distance_sq(&outside, w, h);
+    let to_in = distance_sq(inside, w, h);
+    inside
+        .iter()
+        .enumerate()
+        .map(|(i, &b)| {
+            if b {
+                to_out[i].sqrt() - 0.5
+            } else {
+                -(to_in[i].sqrt() - 0.5)
+            }
+        })
+        .collect()
+}
+
+/// 8-connected components of `mask`: a label per pixel (`u32::MAX` outside) and the sizes.
+fn components(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, Vec<usize>) {
+    let mut label = vec![u32::MAX; mask.len()];
+    let mut sizes = Vec::new();
+    let mut stack = Vec::new();
+    for s in 0..mask.len() {
+        if !mask[s] || label[s] != u32::MAX {
+            continue;
+        }
+        let c = sizes.len() as u32;
+        let mut size = 0usize;
+        label[s] = c;
+        stack.push(s);
+        while let Some(i) = stack.pop() {
+            size += 1;
+            let (x, y) = ((i % w) as isize, (i / w) as isize);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= w as isize || ny >= h as isize {
+                        continue;
+                    }
+                    let j = ny as usize * w + nx as usize;
+                    if mask[j] && label[j] == u32::MAX {
+                        label[j] = c;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        sizes.push(size);
+    }
+    (label, sizes)
+}
+
+/// What a user traces: the region's on-screen mask with its holes filled (one stroke follows
+/// an outer outline) and without specks (components under 2 % of it, or under 50 pixels,
+/// that no one would circle).
+pub fn traced_outline(region: &[bool], w: usize, h: usize) -> Vec<bool> {
+    // Holes: pixels not in the region that the image border cannot reach (4-connected).
+    let mut reach = vec![false; region.len()];
+    let mut stack: Vec<usize> = Vec::new();
+    let push = |i: usize, reach: &mut Vec<bool>, stack: &mut Vec<usize>| {
+        if !region[i] && !reach[i] {
+            reach[i] = true;
+            stack.push(i);
+        }
+    };
+    for x in 0..w {
+        push(x, &mut reach, &mut stack);
+        push((h - 1) * w + x, &mut reach, &mut stack);
+    }
+    for y in 0..h {
+        push(y * w, &mut reach, &mut stack);
+        push(y * w + w - 1, &mut reach, &mut stack);
+    }
+    while let Some(i) = stack.pop() {
+        let (x, y) = (i % w, i / w);
+        if x > 0 {
+            push(i - 1, &mut reach, &mut stack);
+        }
+        if x + 1 < w {
+            push(i + 1, &mut reach, &mut stack);
+        }
+        if y > 0 {
+            push(i - w, &mut reach, &mut stack);
+        }
+        if y + 1 < h {
+            push(i + w, &mut reach, &mut stack);
+        }
+    }
+    let filled: Vec<bool> = reach.iter().map(|&r| !r).collect();
+    let (label, sizes) = components(&filled, w, h);
+    let total: usize = sizes.iter().sum();
+    let keep = (total / 50).max(50);
+    filled
+        .iter()
+        .zip(&label)
+        .map(|(&f, &l)| f && sizes.get(l as usize).is_some_and(|&s| s >= keep))
+        .collect()
+}
+
+/// The strokes of one region, ready to be sent (one label per pixel).
+#[derive(Debug, Clone)]
+pub struct Strokes {
+    pub heavy_lasso: Vec<u8>,
+    pub lasso: Vec<u8>,
+    pub markup: Vec<u8>,
+    /// Width of the heavy band drawn (narrower than asked around thin regions).
+    pub band_px: f32,
+    /// Foreground and background pixels of the markup.
+    pub markup_fg: usize,
+    pub markup_bg: usize,
+}
+
+/// Settings of the simulated user.
+#[derive(Debug, Clone, Copy)]
+pub struct UserModel {
+    /// Amplitude of the outline's jitter, pixels.
+    pub jitter: f32,
+    /// Width of the heavy lasso's band, pixels.
+    pub band: f32,
+}
+
+/// Draws the three tools' strokes for the region mask `region` on a view whose pixels showing
+/// the model are `covered`.
+pub fn draw(
+    region: &[bool],
+    covered: &[bool],
+    w: usize,
+    h: usize,
+    user: UserModel,
+    rng: &mut Rng,
+) -> Strokes {
+    let traced = traced_outline(region, w, h);
+    let sd = signed_distance(&traced, w, h);
+    let jitter = Jitter::new(rng, user.jitter);
+    let offset: Vec<f32> = (0..w * h)
+        .map(|i| sd[i] + jitter.at((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
+        .collect();
+    // A thin part gets a thinner stroke: the band must leave some of the inside enclosed.
+    let half_thickness = sd.iter().copied().fold(0.0f32, f32::max);
+    let band = user.band.min((half_thickness - user.jitter).max(4.0));
+    let heavy_lasso = offset
+        .iter()
+        .map(|&o| if o.abs() < band * 0.5 { mask::HEAVY } else { mask::NONE })
+        .collect();
+    let lasso = offset
+        .iter()
+        .map(|&o| if o > 0.0 { mask::LASSO } else { mask::NONE })
+        .collect();
+
+    // Markup: keep as far from the outline as the heavy band's inner and outer edges.
+    let away = band * 0.5 + user.jitter;
+    let region_sd = signed_distance(region, w, h);
+    let mut fg_area: Vec<bool> = region_sd.iter().map(|&d| d > away).collect();
+    if !fg_area.iter().any(|&b| b) {
+        let deepest = region_sd.iter().copied().fold(0.0f32, f32::max);
+        fg_area = region_sd.iter().map(|&d| d >= deepest * 0.6 && d > 0.0).collect();
+    }
+    let near = |d: f32| d < -away && d > -(away + 80.0);
+    let mut bg_area: Vec<bool> = (0..w * h).map(|i| covered[i] && near(sd[i])).collect();
+    if !bg_area.iter().any(|&b| b) {
+        bg_area = (0..w * h).map(|i| covered[i] && sd[i] < -away).collect();
+    }
+    let mut markup = vec![mask::NONE; w * h];
+    let fg_len = ((fg_area.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
+    let bg_len = ((bg_area.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
+    let markup_fg = strokes(&mut markup, &fg_area, mask::FOREGROUND, 3, fg_len, w, h, rng);
+    let markup_bg = strokes(&mut markup, &bg_area, mask::BACKGROUND, 4, bg_len, w, h, rng);
+    Strokes {
+        heavy_lasso,
+        lasso,
+        markup,
+        band_px: band,
+        markup_fg,
+        markup_bg,
+    }
+}
+
+/// Paints `count` smooth random strokes of about `length` pixels within `area` with `label`
+/// (brush radius 2 px); returns the pixels painted.
+#[allow(clippy::too_many_arguments)]
+fn strokes(
+    out: &mut [u8],
+    area: &[bool],
+    label: u8,
+    count: usize,
+    length: f32,
+    w: usize,
+    h: usize,
+    rng: &mut Rng,
+) -> usize {
+    let pixels: Vec<usize> = (0..area.len()).filter(|&i| area[i]).collect();
+    if pixels.is_empty() {
+        return 0;
+    }
+    let inside = |x: f32, y: f32| {
+        x >= 0.0
+            && y >= 0.0
+            && (x as usize) < w
+            && (y as usize) < h
+            && area[y as usize * w + x as usize]
+    };
+    let mut painted = 0;
+    let mut paint = |x: f32, y: f32, out: &mut [u8]| {
+        for dy in -2i32..=2 {
+            for dx in -2i32..=2 {
+                if dx * dx + dy * dy > 4 {
+                    continue;
+                }
+                let (px, py) = (x as i32 + dx, y as i32 + dy);
+                if px < 0 || py < 0 || px as usize >= w || py as usize >= h {
+                    continue;
+                }
+                let i = py as usize * w + px as usize;
+                if area[i] && out[i] != label {
+                    out[i] = label;
+                    painted += 1;
+                }
+            }
+        }
+    };
+    const STEP: f32 = 1.5;
+    for _ in 0..count {
+        let start = pixels[rng.index(pixels.len())];
+        let (mut x, mut y) = ((start % w) as f32 + 0.5, (start / w) as f32 + 0.5);
+        let mut heading = rng.range(0.0, std::f32::consts::TAU);
+        let mut travelled = 0.0;
+        paint(x, y, out);
+        while travelled < length {
+            heading += rng.range(-0.25, 0.25);
+            let mut moved = false;
+            for _ in 0..8 {
+                let (nx, ny) = (x + STEP * heading.cos(), y + STEP * heading.sin());
+                if inside(nx, ny) {
+                    (x, y) = (nx, ny);
+                    moved = true;
+                    break;
+                }
+                heading += rng.range(-std::f32::consts::PI, std::f32::consts::PI);
+            }
+            if !moved {
+                break;
+            }
+            travelled += STEP;
+            paint(x, y, out);
+        }
+    }
+    painted
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn disc(w: usize, h: usize, cx: f32, cy: f32, r: f32) -> Vec<bool> {
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                (x - cx).powi(2) + (y - cy).powi(2) < r * r
+            })
+            .collect()
+    }
+
+    #[test]
+    fn distance_transform_is_euclidean() {
+        let (w, h) = (9, 7);
+        let mut f = vec![false; w * h];
+        f[3 * w + 4] = true;
+        let d = distance_sq(&f, w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let e = (x as f32 - 4.0).powi(2) + (y as f32 - 3.0).powi(2);
+                assert_eq!(d[y * w + x], e, "({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn strokes_follow_the_outline() {
+        let (w, h) = (200, 160);
+        let region = disc(w, h, 100.0, 80.0, 50.0);
+        let covered = vec![true; w * h];
+        let user = UserModel {
+            jitter: 3.0,
+            band: 12.0,
+        };
+        let s = draw(&region, &covered, w, h, user, &mut Rng::new(7, 1));
+        assert_eq!(s.band_px, 12.0);
+        // The lasso is the disc within the jitter.
+        let wrong = (0..w * h)
+            .filter(|&i| (s.lasso[i] == mask::LASSO) != region[i])
+            .count();
+        let perimeter = std::f32::consts::TAU * 50.0;
+        assert!((wrong as f32) < perimeter * 4.0, "{wrong}");
+        assert!(wrong > 0);
+        // The band's centre and the disc's outline agree; the markup stays off the outline.
+        let band = s.heavy_lasso.iter().filter(|&&l| l == mask::HEAVY).count() as f32;
+        assert!((band - perimeter * 12.0).abs() < perimeter * 3.0, "{band}");
+        let sd = signed_distance(&region, w, h);
+        for i in 0..w * h {
+            match s.markup[i] {
+                mask::FOREGROUND => assert!(sd[i] > 6.0),
+                mask::BACKGROUND => assert!(sd[i] < -6.0),
+                _ => {}
+            }
+        }
+        assert!(s.markup_fg > 50 && s.markup_bg > 50);
+        // Deterministic.
+        let again = draw(&region, &covered, w, h, user, &mut Rng::new(7, 1));
+        assert_eq!(again.markup, s.markup);
+        assert_eq!(again.lasso, s.lasso);
+    }
+
+    #[test]
+    fn specks_are_not_traced_and_holes_are_filled() {
+        let (w, h) = (120, 100);
+        let mut region = disc(w, h, 60.0, 50.0, 30.0);
+        let hole = disc(w, h, 60.0, 50.0, 8.0);
+        for i in 0..w * h {
+            region[i] &= !hole[i];
+        }
+        region[5 * w + 5] = true;
+        let t = traced_outline(&region, w, h);
+        assert!(t[50 * w + 60] && !t[5 * w + 5]);
+    }
+}

@@ -1,0 +1,818 @@
+//! Server-side rendering of a model's hierarchy (issue 4; system paper §3.3, §2.2):
+//!
+//! * `GET /api/v1/models/{id}/render?...` — the image (PNG, JPEG or lossless WebP): parts
+//!   tinted, the hovered part outlined, callouts drawn on request;
+//! * `GET /api/v1/models/{id}/render/buffers?...` — normal, depth and id buffers (and colour
+//!   on request) for tools, in the binary layout of [`BUFFERS_MAGIC`] below;
+//! * `GET /api/v1/models/{id}/render/callouts?...` — the callout layout as JSON, for the
+//!   browser to draw as HTML.
+//!
+//! Parameters (all optional): `eye`, `target`, `up` (`x,y,z`; without `eye` the model's
+//! overview camera, without `target` the model's centre, `up` defaults to +Y), `fovy`
+//! (degrees, 1–170, default 45), `w`, `h` (default 640×480, at most `MESHWIKI_RENDER_MAX_SIDE`
+//! per side and `MESHWIKI_RENDER_MAX_PIXELS` in all), `parts` (part ids to tint, in order,
+//! at most 64), `hover` (a part id to outline), `px` (pixel error of the cut, 0.25–64,
+//! default 1); image only: `format` (`png`, `jpeg`, `webp`), `quality` (JPEG, 1–100),
+//! `callouts` (`1` draws labels for `parts` and `hover`, or for every part of the model when
+//! none is named); buffers only: `buffers` (a subset of `color,normal,depth,ids`, default
+//! `normal,depth,ids`). Every value is checked (400 with a message); unknown model 404, model
+//! not ready 409; renders go through the bounded pool (`crate::render`): a full queue gives
+//! 503 with `Retry-After`, no GPU adapter gives 503. Anyone logged in may render.
+//!
+//! Buffers layout (little endian): bytes 0–3 the magic `MWRB`, 4–7 u32 version (1), 8–11 u32
+//! `J`, the length of the JSON header that follows (UTF-8, padded with spaces to a multiple of
+//! 4), then the arrays, each at the byte `offset` (from the start of the body) and of the
+//! `bytes` its entry in the header's `buffers` list gives. All are row-major, top row first,
+//! `width × height` elements of `components` values of `type`:
+//! `color` u8×4 (RGBA), `normal` f32×3 (world-space unit normal, 0 on the background), `depth`
+//! f32 (linear view depth, +inf on the background), `node` u32 (patch id), `vertex` u32
+//! (original vertex id of the model: the corner of the drawn triangle nearest to the pixel
+//! centre), `triangle` u32 (index in its patch), `highlight` u32 (bits 0–7: 1-based index of
+//! the tinting part in `parts`, bit 8: hovered part, bit 31: covered); ids are `0xFFFFFFFF`
+//! on the background.
+
+use std::pin::Pin;
+use std::task::{Context, Poll};
+
+use actix_web::body::{BodySize, MessageBody};
+use actix_web::http::header::{self, ContentEncoding};
+use actix_web::{HttpResponse, web};
+use glam::Vec3;
+use meshwiki_engine::camera::Camera;
+use meshwiki_engine::lod::Culling;
+use meshwiki_engine::render::best_view::{BestViewOptions, framing_camera};
+use meshwiki_engine::render::callouts::{self, CalloutPart, CalloutStyle, LayoutOptions};
+use meshwiki_engine::render::encode::{self, ImageFormat};
+use meshwiki_engine::render::highlight::TINTS;
+use meshwiki_engine::render::{Cut, Highlight, Model, Outputs, RenderOptions, RenderStats};
+use roaring::RoaringBitmap;
+use serde::Deserialize;
+use serde_json::json;
+
+use super::auth::Auth;
+use super::{ApiError, AppState};
+use crate::config::RenderSettings;
+use crate::render::{MemoryHold, PoolError, RenderService, RenderServiceError};
+use crate::store::models::{self, ModelStatus};
+use crate::store::{assignments, parts};
+
+/// Magic of the buffers body.
+pub const BUFFERS_MAGIC: &[u8; 4] = b"MWRB";
+/// Version of the buffers body.
+pub const BUFFERS_VERSION: u32 = 1;
+/// Most parts named in `parts` (tinted) or labelled with callouts.
+pub const MAX_PARTS: usize = 64;
+/// Default image size.
+const DEFAULT_SIZE: (u32, u32) = (640, 480);
+/// Default vertical field of view.
+const DEFAULT_FOVY: f32 = 45.0;
+
+/// Mounts the routes.
+pub fn configure(cfg: &mut web::ServiceConfig) {
+    cfg.service(super::resource("/api/v1/models/{id}/render").route(web::get().to(image)))
+        .service(
+            super::resource("/api/v1/models/{id}/render/buffers").route(web::get().to(buffers)),
+        )
+        .service(
+            super::resource("/api/v1/models/{id}/render/callouts")
+                .route(web::get().to(callouts_json)),
+        );
+}
+
+impl From<RenderServiceError> for ApiError {
+    fn from(e: RenderServiceError) -> ApiError {
+        match e {
+            RenderServiceError::Unavailable(_) => ApiError::Unavailable {
+                message: e.to_string(),
+                retry_after: None,
+            },
+            RenderServiceError::Pool(PoolError::Busy { retry_after, .. }) => {
+                ApiError::Unavailable {
+                    message: e.to_string(),
+                    retry_after: Some(retry_after),
+                }
+            }
+            RenderServiceError::OutOfMemory => ApiError::Unavailable {
+                message: e.to_string(),
+                retry_after: Some(5),
+            },
+            RenderServiceError::Pool(PoolError::TooLarge { .. })
+            | RenderServiceError::Invalid(_) => ApiError::BadRequest(e.to_string()),
+            RenderServiceError::Lod(_)
+            | RenderServiceError::Failed(_)
+            | RenderServiceError::Encode(_) => ApiError::internal(e),
+        }
+    }
+}
+
+/// Query parameters (strings, parsed by [`Params::parse`] for precise messages).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderQuery {
+    eye: Option<String>,
+    target: Option<String>,
+    up: Option<String>,
+    fovy: Option<String>,
+    w: Option<String>,
+    h: Option<String>,
+    parts: Option<String>,
+    hover: Option<String>,
+    px: Option<String>,
+    format: Option<String>,
+    quality: Option<String>,
+    callouts: Option<String>,
+    buffers: Option<String>,
+}
+
+/// Which route parses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Route {
+    Image,
+    Buffers,
+    Callouts,
+}
+
+/// Checked parameters.
+#[derive(Debug, Clone)]
+struct Params {
+    eye: Option<Vec3>,
+    target: Option<Vec3>,
+    up: Option<Vec3>,
+    fovy: f32,
+    width: u32,
+    height: u32,
+    parts: Vec<i64>,
+    hover: Option<i64>,
+    px: f32,
+    format: ImageFormat,
+    quality: u8,
+    callouts: bool,
+    outputs: Outputs,
+}
+
+fn given(v: &Option<String>) -> Option<&str> {
+    v.as_deref().map(str::trim).filter(|s| !s.is_empty())
+}
+
+fn vec3(name: &str, v: &Option<String>) -> Result<Option<Vec3>, ApiError> {
+    let Some(s) = given(v) else { return Ok(None) };
+    let bad = || {
+        ApiError::bad(format!(
+            "{name} must be three finite numbers x,y,z, got {s:?}"
+        ))
+    };
+    let nums: Vec<f32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad())?;
+    match nums[..] {
+        [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => {
+            Ok(Some(Vec3::new(x, y, z)))
+        }
+        _ => Err(bad()),
+    }
+}
+
+fn number<T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy>(
+    name: &str,
+    v: &Option<String>,
+    range: std::ops::RangeInclusive<T>,
+    default: T,
+) -> Result<T, ApiError> {
+    let Some(s) = given(v) else {
+        return Ok(default);
+    };
+    let bad = || {
+        ApiError::bad(format!(
+            "{name} must be a number from {} to {}, got {s:?}",
+            range.start(),
+            range.end()
+        ))
+    };
+    let n: T = s.parse().map_err(|_| bad())?;
+    // NaN fails `contains`.
+    if range.contains(&n) {
+        Ok(n)
+    } else {
+        Err(bad())
+    }
+}
+
+fn part_id(name: &str, s: &str) -> Result<i64, ApiError> {
+    s.trim()
+        .parse::<i64>()
+        .ok()
+        .filter(|&id| id > 0)
+        .ok_or_else(|| ApiError::bad(format!("{name} must list part ids, got {s:?}")))
+}
+
+fn flag(name: &str, v: &Option<String>) -> Result<bool, ApiError> {
+    match given(v).map(str::to_ascii_lowercase).as_deref() {
+        None | Some("0" | "false" | "no") => Ok(false),
+        Some("1" | "true" | "yes") => Ok(true),
+        Some(other) => Err(ApiError::bad(format!(
+            "{name} must be 1 or 0, got {other:?}"
+        ))),
+    }
+}
+
+impl Params {
+    fn parse(q: &RenderQuery, route: Route, limits: &RenderSettings) -> Result<Params, ApiError> {
+        let only = |name: &str, v: &Option<String>, on: Route, path: &str| {
+            if v.is_some() && route != on {
+                Err(ApiError::bad(format!(
+                    "parameter {name} applies to {path} only"
+                )))
+            } else {
+                Ok(())
+            }
+        };
+        only("format", &q.format, Route::Image, "/render")?;
+        only("quality", &q.quality, Route::Image, "/render")?;
+        only("callouts", &q.callouts, Route::Image, "/render")?;
+        only("buffers", &q.buffers, Route::Buffers, "/render/buffers")?;
+
+        let eye = vec3("eye", &q.eye)?;
+        let target = vec3("target", &q.target)?;
+        let up = vec3("up", &q.up)?;
+        if eye.is_none() && target.is_some() {
+            return Err(ApiError::bad("target needs an eye"));
+        }
+        if let (Some(e), Some(t)) = (eye, target)
+            && e.distance_squared(t) <= f32::MIN_POSITIVE
+        {
+            return Err(ApiError::bad("eye and target must differ"));
+        }
+        if up.is_some_and(|u| u.length_squared() <= f32::MIN_POSITIVE) {
+            return Err(ApiError::bad("up must not be zero"));
+        }
+        let fovy = number("fovy", &q.fovy, 1.0f32..=170.0, DEFAULT_FOVY)?;
+        let side = limits.max_side.clamp(16, Camera::MAX_SIDE);
+        let width = number("w", &q.w, 1u32..=side, DEFAULT_SIZE.0.min(side))?;
+        let height = number("h", &q.h, 1u32..=side, DEFAULT_SIZE.1.min(side))?;
+        let pixels = width as u64 * height as u64;
+        if pixels > limits.max_pixels {
+            return Err(ApiError::bad(format!(
+                "image of {width}x{height} = {pixels} pixels exceeds the limit of {} pixels",
+                limits.max_pixels
+            )));
+        }
+        let mut parts = Vec::new();
+        if let Some(list) = given(&q.parts) {
+            for s in list.split(',') {
+                let id = part_id("parts", s)?;
+                if !parts.contains(&id) {
+                    parts.push(id);
+                }
+                if parts.len() > MAX_PARTS {
+                    return Err(ApiError::bad(format!(
+                        "at most {MAX_PARTS} parts per render"
+                    )));
+                }
+            }
+        }
+        let hover = given(&q.hover).map(|s| part_id("hover", s)).transpose()?;
+        let px = number("px", &q.px, 0.25f32..=64.0, 1.0)?;
+        let format = match given(&q.format) {
+            None => ImageFormat::Png,
+            Some(f) => ImageFormat::parse(f).ok_or_else(|| {
+                ApiError::bad(format!("format must be png, jpeg or webp, got {f:?}"))
+            })?,
+        };
+        let quality = number("quality", &q.quality, 1u8..=100, 90)?;
+        let callouts = flag("callouts", &q.callouts)?;
+        let outputs = match route {
+            Route::Image if callouts => Outputs::IMAGE_DEPTH,
+            Route::Image => Outputs::IMAGE,
+            Route::Callouts => Outputs {
+                depth: true,
+                ..Outputs::default()
+            },
+            Route::Buffers => {
+                let mut o = Outputs::default();
+                let list = given(&q.buffers).unwrap_or("normal,depth,ids");
+                for b in list.split(',') {
+                    match b.trim() {
+                        "color" | "colour" => o.color = true,
+                        "normal" => o.normal = true,
+                        "depth" => o.depth = true,
+                        "ids" => o.ids = true,
+                        other => {
+                            return Err(ApiError::bad(format!(
+                                "buffers must list color, normal, depth or ids, got {other:?}"
+                            )));
+                        }
+                    }
+                }
+                o
+            }
+        };
+        Ok(Params {
+            eye,
+            target,
+            up,
+            fovy,
+            width,
+            height,
+            parts,
+            hover,
+            px,
+            format,
+            quality,
+            callouts,
+            outputs,
+        })
+    }
+
+    /// The camera on `model` (defaults as in the module documentation).
+    fn camera(&self, model: &Model) -> Result<Camera, ApiError> {
+        let (w, h) = (self.width, self.height);
+        let cam = match self.eye {
+            None => {
+                let overview = crate::jobs::thumbnail::camera(model.lod());
+                let dir = (overview.eye - overview.target).normalize_or_zero();
+                let opts = BestViewOptions {
+                    fovy_deg: self.fovy,
+                    margin: 1.05,
+                    up: self.up.unwrap_or(overview.up),
+                    ..BestViewOptions::default()
+                };
+                framing_camera(overview.target, dir, model.radius(), &opts, w, h)
+            }
+            Some(eye) => {
+                let target = self.target.unwrap_or_else(|| model.center());
+                let dir = (target - eye).normalize_or_zero();
+                let up = self.up.unwrap_or(if dir.cross(Vec3::Y).length() > 1e-3 {
+                    Vec3::Y
+                } else {
+                    Vec3::Z
+                });
+                Camera {
+                    eye,
+                    target,
+                    up,
+                    fovy_deg: self.fovy,
+                    width: w,
+                    height: h,
+                }
+            }
+        };
+        cam.validate()
+            .map_err(|e| ApiError::bad(format!("invalid camera: {e}")))?;
+        Ok(cam)
+    }
+
+    /// Parts named (tinted ones, then the hovered one if not among them).
+    fn named(&self) -> Vec<i64> {
+        let mut v = self.parts.clone();
+        if let Some(h) = self.hover
+            && !v.contains(&h)
+        {
+            v.push(h);
+        }
+        v
+    }
+}
+
+fn camera_json(c: &Camera) -> serde_json::Value {
+    json!({"eye": c.eye.to_array(), "target": c.target.to_array(), "up": c.up.to_array(),
+           "fovy": c.fovy_deg, "width": c.width, "height": c.height})
+}
+
+/// The LOD file of a ready model: 404 unknown, 409 not ready.
+async fn ready_model(state: &AppState, model_id: i64) -> Result<std::path::PathBuf, ApiError> {
+    let model = models::get(&state.db, model_id).await?;
+    match model.status {
+        ModelStatus::Ready => {}
+        ModelStatus::Pending | ModelStatus::Building => {
+            return Err(ApiError::Conflict(format!(
+                "model {model_id} is {}: it can be rendered once its status is ready",
+                model.status.as_str()
+            )));
+        }
+        ModelStatus::Failed => {
+            return Err(ApiError::Conflict(format!(
+                "model {model_id} cannot be rendered: its build failed: {}",
+                model.error.as_deref().unwrap_or("unknown error")
+            )));
+        }
+    }
+    let rel = model
+        .lod_path
+        .as_deref()
+        .filter(|p| {
+            let p = std::path::Path::new(p);
+            p.components().count() >= 2
+                && p.components()
+                    .all(|c| matches!(c, std::path::Component::Normal(_)))
+        })
+        .ok_or_else(|| ApiError::Conflict(format!("model {model_id} has no LOD file")))?;
+    Ok(state.settings.data_dir.join(rel))
+}
+
+/// Checks that every named part is on the model; returns the bytes of their vertex sets.
+async fn check_parts(state: &AppState, model_id: i64, ids: &[i64]) -> Result<u64, ApiError> {
+    let mut bytes = 0u64;
+    for &id in ids {
+        match parts::model_and_set_size(&state.db, id).await? {
+            None => return Err(ApiError::bad(format!("unknown part {id}"))),
+            Some((m, _)) if m != model_id => {
+                return Err(ApiError::bad(format!(
+                    "part {id} is not on model {model_id}"
+                )));
+            }
+            Some((_, size)) => bytes += size.max(0) as u64,
+        }
+    }
+    Ok(bytes)
+}
+
+/// Vertex sets of the named parts, in order.
+async fn load_sets(state: &AppState, ids: &[i64]) -> Result<Vec<(i64, RoaringBitmap)>, ApiError> {
+    let mut out = Vec::with_capacity(ids.len());
+    for &id in ids {
+        let blob = parts::vertex_set_raw(&state.db, id).await?;
+        let set = crate::render::views::vertex_set(blob.as_deref())
+            .map_err(|e| ApiError::internal(format!("part {id}: {e}")))?;
+        out.push((id, set));
+    }
+    Ok(out)
+}
+
+/// Callout anchors and titles: the named parts, or every part of the model.
+async fn callout_parts(
+    state: &AppState,
+    model_id: i64,
+    named: &[i64],
+    model: &Model,
+) -> Result<Vec<CalloutPart>, ApiError> {
+    let all = parts::list_for_model(&state.db, model_id).await?;
+    let chosen: Vec<&parts::Part> = if named.is_empty() {
+        all.iter().take(MAX_PARTS).collect()
+    } else {
+        named
+            .iter()
+            .filter_map(|id| all.iter().find(|p| p.id == *id))
+            .collect()
+    };
+    let mut out = Vec::with_capacity(chosen.len());
+    for p in chosen {
+        let title = assignments::contents_for_part(&state.db, p.id)
+            .await?
+            .into_iter()
+            .next()
+            .map(|c| c.title)
+            .unwrap_or_else(|| format!("Part {}", p.id));
+        let anchor = Vec3::new(p.center[0] as f32, p.center[1] as f32, p.center[2] as f32);
+        if !anchor.is_finite() {
+            continue;
+        }
+        out.push(CalloutPart {
+            part: p.id,
+            anchor,
+            title,
+            radius: model.radius() * 0.02,
+        });
+    }
+    Ok(out)
+}
+
+/// The highlights of `sets`: `tinted` first ones tinted in order, `hover` outlined.
+fn highlights<'a>(
+    sets: &'a [(i64, RoaringBitmap)],
+    tinted: usize,
+    hover: Option<i64>,
+) -> Vec<Highlight<'a>> {
+    sets.iter()
+        .enumerate()
+        .map(|(i, (id, set))| Highlight {
+            vertices: set,
+            tint: (i < tinted).then(|| TINTS[i % TINTS.len()]),
+            outline: hover == Some(*id),
+        })
+        .collect()
+}
+
+/// A response body that keeps its render's memory reserved until it is sent.
+struct HeldBody {
+    data: Option<web::Bytes>,
+    len: u64,
+    _hold: MemoryHold,
+}
+
+impl MessageBody for HeldBody {
+    type Error = std::convert::Infallible;
+
+    fn size(&self) -> BodySize {
+        BodySize::Sized(self.len)
+    }
+
+    fn poll_next(
+        self: Pin<&mut Self>,
+        _cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<web::Bytes, Self::Error>>> {
+        Poll::Ready(self.get_mut().data.take().map(Ok))
+    }
+}
+
+fn held(data: Vec<u8>, hold: MemoryHold) -> HeldBody {
+    HeldBody {
+        len: data.len() as u64,
+        data: Some(web::Bytes::from(data)),
+        _hold: hold,
+    }
+}
+
+/// What every route does first: parameters, service, model, parts.
+struct Prepared {
+    service: RenderService,
+    params: Params,
+    model: Model,
+    camera: Camera,
+    set_bytes: u64,
+}
+
+async fn prepare(
+    state: &AppState,
+    model_id: i64,
+    q: &RenderQuery,
+    route: Route,
+) -> Result<Prepared, ApiError> {
+    let service = state.render.clone();
+    let params = Params::parse(q, route, service.settings())?;
+    service.renderer()?;
+    let path = ready_model(state, model_id).await?;
+    let set_bytes = check_parts(state, model_id, &params.named()).await?;
+    let model = service.model(model_id, path).await?;
+    let camera = params.camera(&model)?;
+    Ok(Prepared {
+        service,
+        params,
+        model,
+        camera,
+        set_bytes,
+    })
+}
+
+fn stats_headers(resp: &mut actix_web::HttpResponseBuilder, stats: &RenderStats) {
+    resp.insert_header(("X-Render-Triangles", stats.triangles.to_string()))
+        .insert_header(("X-Render-Patches", stats.nodes.to_string()))
+        .insert_header(("X-Render-Ms", format!("{:.1}", stats.total_ms)));
+}
+
+async fn image(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    model_id: web::Path<i64>,
+    q: web::Query<RenderQuery>,
+) -> Result<HttpResponse, ApiError> {
+    let model_id = *model_id;
+    let p = prepare(&state, model_id, &q, Route::Image).await?;
+    let (w, h) = (p.params.width, p.params.height);
+    let bytes = p.params.outputs.frame_bytes(w, h) + w as u64 * h as u64 * 4 + 2 * p.set_bytes;
+    let ticket = p.service.admit(bytes).await?;
+    let named = p.params.named();
+    let sets = load_sets(&state, &named).await?;
+    let labels = if p.params.callouts {
+        callout_parts(&state, model_id, &named, &p.model).await?
+    } else {
+        Vec::new()
+    };
+    let (params, model, camera) = (p.params, p.model, p.camera);
+    let (result, hold) = p
+        .service
+        .run(ticket, move |r| -> Result<_, RenderServiceError> {
+            let marks = highlights(&sets, params.parts.len(), params.hover);
+            let options = RenderOptions {
+                cut: Cut::View {
+                    pixel_error: params.px,
+                    culling: Culling::ALL,
+                },
+                outputs: params.outputs,
+                ..RenderOptions::default()
+            };
+            let mut frame = r.render(&model, &camera, &options, &marks)?;
+            let mut color = frame
+                .color
+                .take()
+                .ok_or_else(|| RenderServiceError::Failed("no colour buffer".into()))?;
+            if params.callouts {
+                let opts = LayoutOptions::for_height(camera.height);
+                let layout = callouts::layout(&labels, &camera, frame.depth.as_deref(), &opts)
+                    .map_err(|e| RenderServiceError::Invalid(e.to_string()))?;
+                frame.depth = None;
+                callouts::draw(
+                    &mut color,
+                    &layout,
+                    &CalloutStyle {
+                        font_scale: opts.font_scale,
+                        ..CalloutStyle::default()
+                    },
+                );
+            }
+            let bytes = encode::encode(
+                &color,
+                camera.width,
+                camera.height,
+                params.format,
+                params.quality,
+                [255, 255, 255],
+            )?;
+            Ok((bytes, frame.stats, params.format))
+        })
+        .await?;
+    let (data, stats, format) = result?;
+    let mut resp = HttpResponse::Ok();
+    resp.insert_header((header::CONTENT_TYPE, format.mime()))
+        .insert_header(ContentEncoding::Identity);
+    stats_headers(&mut resp, &stats);
+    Ok(resp.body(held(data, hold)))
+}
+
+async fn buffers(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    model_id: web::Path<i64>,
+    q: web::Query<RenderQuery>,
+) -> Result<HttpResponse, ApiError> {
+    let p = prepare(&state, *model_id, &q, Route::Buffers).await?;
+    let (w, h) = (p.params.width, p.params.height);
+    let o = p.params.outputs;
+    let per_px = 4 * o.color as u64 + 12 * o.normal as u64 + 4 * o.depth as u64 + 16 * o.ids as u64;
+    let bytes = o.frame_bytes(w, h) + per_px * w as u64 * h as u64 + 4096 + 2 * p.set_bytes;
+    let ticket = p.service.admit(bytes).await?;
+    let sets = load_sets(&state, &p.params.named()).await?;
+    let (params, model, camera) = (p.params, p.model, p.camera);
+    let (result, hold) = p
+        .service
+        .run(ticket, move |r| -> Result<_, RenderServiceError> {
+            let marks = highlights(&sets, params.parts.len(), params.hover);
+            let options = RenderOptions {
+                cut: Cut::View {
+                    pixel_error: params.px,
+                    culling: Culling::ALL,
+                },
+                outputs: params.outputs,
+                ..RenderOptions::default()
+            };
+            let frame = r.render(&model, &camera, &options, &marks)?;
+            Ok(buffers_body(frame, &camera, &params))
+        })
+        .await?;
+    let (data, stats) = result?;
+    let mut resp = HttpResponse::Ok();
+    resp.insert_header((header::CONTENT_TYPE, "application/octet-stream"))
+        .insert_header(ContentEncoding::Identity);
+    stats_headers(&mut resp, &stats);
+    Ok(resp.body(held(data, hold)))
+}
+
+/// Lays out the buffers body (see the module documentation), consuming the frame.
+fn buffers_body(
+    mut frame: meshwiki_engine::render::Frame,
+    camera: &Camera,
+    params: &Params,
+) -> (Vec<u8>, RenderStats) {
+    let n = frame.width as u64 * frame.height as u64;
+    type Entry = (&'static str, &'static str, u32);
+    let mut entries: Vec<Entry> = Vec::new();
+    if frame.color.is_some() {
+        entries.push(("color", "u8", 4));
+    }
+    if frame.normal.is_some() {
+        entries.push(("normal", "f32", 3));
+    }
+    if frame.depth.is_some() {
+        entries.push(("depth", "f32", 1));
+    }
+    if frame.ids.is_some() {
+        for name in ["node", "vertex", "triangle", "highlight"] {
+            entries.push((name, "u32", 1));
+        }
+    }
+    // Header with placeholder offsets first, to know its length; offsets are fixed-width.
+    let header_for = |base: u64| {
+        let mut offset = base;
+        let list: Vec<serde_json::Value> = entries
+            .iter()
+            .map(|(name, ty, comps)| {
+                let bytes = n * *comps as u64 * if *ty == "u8" { 1 } else { 4 };
+                let e = json!({"name": name, "type": ty, "components": comps,
+                               "offset": offset, "bytes": bytes});
+                offset += bytes;
+                e
+            })
+            .collect();
+        json!({
+            "version": BUFFERS_VERSION,
+            "width": frame.width,
+            "height": frame.height,
+            "camera": camera_json(camera),
+            "pixel_error": params.px,
+            "parts": params.parts,
+            "hover": params.hover,
+            "background": {"normal": [0.0, 0.0, 0.0], "depth": "inf", "id": u32::MAX},
+            "stats": {"patches": frame.stats.nodes, "triangles": frame.stats.triangles,
+                      "loaded": frame.stats.loaded, "ms": frame.stats.total_ms},
+            "buffers": list,
+        })
+        .to_string()
+    };
+    // The header's length depends on the offsets' digits: iterate to a fixed point.
+    let mut base = 12u64;
+    let mut text = header_for(base);
+    for _ in 0..4 {
+        let padded = (text.len() as u64).div_ceil(4) * 4;
+        if 12 + padded == base {
+            break;
+        }
+        base = 12 + padded;
+        text = header_for(base);
+    }
+    let padded = (text.len()).div_ceil(4) * 4;
+    let total: u64 = base
+        + entries
+            .iter()
+            .map(|(_, ty, c)| n * *c as u64 * if *ty == "u8" { 1 } else { 4 })
+            .sum::<u64>();
+    let mut out = Vec::with_capacity(total as usize);
+    out.extend_from_slice(BUFFERS_MAGIC);
+    out.extend_from_slice(&BUFFERS_VERSION.to_le_bytes());
+    out.extend_from_slice(&(padded as u32).to_le_bytes());
+    out.extend_from_slice(text.as_bytes());
+    out.resize(12 + padded, b' ');
+    debug_assert_eq!(out.len() as u64, base);
+    if let Some(c) = frame.color.take() {
+        out.extend_from_slice(bytemuck_bytes_u8(&c));
+    }
+    if let Some(nrm) = frame.normal.take() {
+        for v in nrm {
+            for x in v {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+    }
+    if let Some(d) = frame.depth.take() {
+        for x in d {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    if let Some(ids) = frame.ids.take() {
+        for list in [ids.node, ids.vertex, ids.triangle, ids.highlight] {
+            for x in list {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+    }
+    (out, frame.stats)
+}
+
+fn bytemuck_bytes_u8(px: &[[u8; 4]]) -> &[u8] {
+    px.as_flattened()
+}
+
+async fn callouts_json(
+    state: web::Data<AppState>,
+    _auth: Auth,
+    model_id: web::Path<i64>,
+    q: web::Query<RenderQuery>,
+) -> Result<HttpResponse, ApiError> {
+    let model_id = *model_id;
+    let p = prepare(&state, model_id, &q, Route::Callouts).await?;
+    let (w, h) = (p.params.width, p.params.height);
+    let ticket = p
+        .service
+        .admit(p.params.outputs.frame_bytes(w, h) + 2 * p.set_bytes)
+        .await?;
+    let named = p.params.named();
+    let labels = callout_parts(&state, model_id, &named, &p.model).await?;
+    let (params, model, camera) = (p.params, p.model, p.camera);
+    let (result, _hold) = p
+        .service
+        .run(ticket, move |r| -> Result<_, RenderServiceError> {
+            let options = RenderOptions {
+                cut: Cut::View {
+                    pixel_error: params.px,
+                    culling: Culling::ALL,
+                },
+                outputs: params.outputs,
+                ..RenderOptions::default()
+            };
+            let frame = r.render(&model, &camera, &options, &[])?;
+            let opts = LayoutOptions::for_height(camera.height);
+            let layout = callouts::layout(&labels, &camera, frame.depth.as_deref(), &opts)
+                .map_err(|e| RenderServiceError::Invalid(e.to_string()))?;
+            Ok((layout, opts.font_scale))
+        })
+        .await?;
+    let (layout, font_scale) = result?;
+    Ok(HttpResponse::Ok().json(json!({
+        "width": layout.width,
+        "height": layout.height,
+        "camera": camera_json(&camera),
+        "font_scale": font_scale,
+        "callouts": layout.callouts,
+        "hidden": layout.hidden,
+    })))
+}

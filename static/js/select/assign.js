@@ -1,0 +1,259 @@
+// The "assign information" step after a region is confirmed: drop a file (image, PDF, text)
+// onto the region or the drop zone, give a link, or pick existing information found by the
+// search. A file is stored (`POST /api/v1/attachments`), a content made around it
+// (`POST /api/v1/contents`), the file attached to it (`PUT /api/v1/contents/{id}/attachments/
+// {attachment}`) and the content assigned to the part (`POST /api/v1/parts/{id}/contents`).
+
+const TEXT_INLINE_BYTES = 64 * 1024;
+
+function el(tag, cls, text) {
+  const e = document.createElement(tag);
+  if (cls) e.className = cls;
+  if (text !== undefined) e.textContent = text;
+  return e;
+}
+
+function field(label, input) {
+  const l = el('label', 'assign-field', label);
+  l.append(input);
+  return l;
+}
+
+function input(type, name, attrs = {}) {
+  const i = document.createElement('input');
+  i.type = type;
+  i.name = name;
+  Object.assign(i, attrs);
+  return i;
+}
+
+/** Markdown of a link (brackets and parentheses escaped). */
+function mdLink(text, url) {
+  const t = text.replace(/([\\[\]])/g, '\\$1');
+  return `[${t}](<${url.replace(/[<>]/g, encodeURIComponent)}>)`;
+}
+
+function isText(file) {
+  return file.type.startsWith('text/') || /\.(txt|md|markdown)$/i.test(file.name);
+}
+
+export class AssignStep {
+  /**
+   * @param {HTMLElement} stage where the card shows and files may be dropped
+   * @param {import('./api.js').Api} api
+   * @param {{assigned: (partId: number, content: object) => void, closed: () => void}} handlers
+   */
+  constructor(stage, api, handlers) {
+    this.stage = stage;
+    this.api = api;
+    this.handlers = handlers;
+    this.partId = null;
+    this.root = el('section', 'select-assign');
+    this.root.hidden = true;
+    stage.appendChild(this.root);
+    this.onDragOver = (e) => {
+      if (!this.isOpen() || !e.dataTransfer || ![...e.dataTransfer.types].includes('Files')) return;
+      e.preventDefault();
+      e.dataTransfer.dropEffect = 'copy';
+      this.stage.classList.add('drop-target');
+    };
+    this.onDragLeave = (e) => {
+      if (e.target === this.stage || !this.stage.contains(e.relatedTarget)) this.stage.classList.remove('drop-target');
+    };
+    this.onDrop = (e) => {
+      if (!this.isOpen() || !e.dataTransfer || e.dataTransfer.files.length === 0) return;
+      e.preventDefault();
+      this.stage.classList.remove('drop-target');
+      this.addFiles([...e.dataTransfer.files]);
+    };
+    stage.addEventListener('dragover', this.onDragOver);
+    stage.addEventListener('dragleave', this.onDragLeave);
+    stage.addEventListener('drop', this.onDrop);
+  }
+
+  isOpen() {
+    return !this.root.hidden;
+  }
+
+  /** Opens the step on part `partId`; `title` is the suggested title of new information. */
+  open(partId, title) {
+    this.partId = partId;
+    this.busy = false;
+    this.root.replaceChildren();
+    this.root.hidden = false;
+    this.root.dataset.partId = String(partId);
+    this.root.setAttribute('aria-label', `Assign information to part ${partId}`);
+    const head = el('header', 'assign-head');
+    head.append(el('h3', null, `Assign information to part ${partId}`));
+    const done = el('button', 'assign-done', 'Done');
+    done.type = 'button';
+    done.dataset.action = 'assign-done';
+    done.addEventListener('click', () => this.close());
+    head.append(done);
+
+    this.title = input('text', 'title', { placeholder: title, maxLength: 200 });
+    this.caption = input('text', 'caption', { placeholder: 'One line shown with the title', maxLength: 500 });
+    const details = el('div', 'assign-details');
+    details.append(field('Title ', this.title), field('Caption ', this.caption));
+
+    const drop = el('div', 'assign-drop');
+    drop.tabIndex = 0;
+    drop.setAttribute('role', 'button');
+    drop.append(el('span', null, 'Drop an image, PDF or text file here or onto the region, or '));
+    const choose = el('label', 'assign-choose', 'choose a file');
+    this.file = input('file', 'file', { accept: 'image/*,application/pdf,text/*,.md,.txt' });
+    this.file.className = 'sr-only';
+    this.file.addEventListener('change', () => {
+      if (this.file.files.length) this.addFiles([...this.file.files]);
+      this.file.value = '';
+    });
+    choose.append(this.file);
+    drop.append(choose);
+    drop.addEventListener('keydown', (e) => {
+      if (e.key === 'Enter' || e.key === ' ') {
+        e.preventDefault();
+        this.file.click();
+      }
+    });
+
+    const linkForm = el('form', 'assign-link');
+    this.url = input('url', 'url', { placeholder: 'https://…', required: true });
+    this.url.setAttribute('aria-label', 'Link to the information');
+    const addLink = el('button', null, 'Add link');
+    addLink.type = 'submit';
+    linkForm.append(this.url, addLink);
+    linkForm.addEventListener('submit', (e) => {
+      e.preventDefault();
+      this.addLink(this.url.value.trim());
+    });
+
+    const searchForm = el('form', 'assign-search');
+    searchForm.setAttribute('role', 'search');
+    this.query = input('search', 'q', { placeholder: 'Search existing information…' });
+    this.query.setAttribute('aria-label', 'Search existing information');
+    const go = el('button', null, 'Search');
+    go.type = 'submit';
+    searchForm.append(this.query, go);
+    searchForm.addEventListener('submit', (e) => {
+      e.preventDefault();
+      this.search(this.query.value.trim());
+    });
+    this.results = el('ul', 'assign-results');
+
+    this.message = el('p', 'assign-message');
+    this.message.setAttribute('role', 'status');
+    this.assignedList = el('ul', 'assign-assigned');
+    this.root.append(head, details, drop, linkForm, searchForm, this.results, this.message, this.assignedList);
+    this.title.focus();
+  }
+
+  close() {
+    if (!this.isOpen()) return;
+    this.root.hidden = true;
+    this.stage.classList.remove('drop-target');
+    const id = this.partId;
+    this.partId = null;
+    this.handlers.closed(id);
+  }
+
+  say(text, isError = false) {
+    this.message.textContent = text;
+    this.message.classList.toggle('error', isError);
+  }
+
+  titleFor(fallback) {
+    return this.title.value.trim() || fallback || this.title.placeholder;
+  }
+
+  /** Runs one assignment at a time, reporting its outcome. */
+  async run(what, job) {
+    if (this.busy) return;
+    this.busy = true;
+    this.root.classList.add('busy');
+    this.say(`${what}…`);
+    try {
+      const content = await job();
+      await this.api.post(`/api/v1/parts/${this.partId}/contents`, { content_id: content.id });
+      const li = el('li', null, content.title);
+      li.dataset.contentId = String(content.id);
+      this.assignedList.append(li);
+      this.say(`Assigned “${content.title}” to part ${this.partId}.`);
+      this.title.value = '';
+      this.caption.value = '';
+      this.handlers.assigned(this.partId, content);
+    } catch (e) {
+      this.say(e.message, true);
+    } finally {
+      this.busy = false;
+      this.root.classList.remove('busy');
+    }
+  }
+
+  addFiles(files) {
+    const file = files[0];
+    if (!file) return;
+    if (files.length > 1) this.say('One file at a time: the first is used.');
+    return this.run(`Uploading ${file.name}`, async () => {
+      const form = new FormData();
+      form.append('file', file, file.name);
+      const att = await this.api.post('/api/v1/attachments', form);
+      const href = `/api/v1/attachments/${att.id}/download`;
+      const image = att.media_type.startsWith('image/');
+      let body = image ? `!${mdLink(att.original_name, href)}\n` : `${mdLink(att.original_name, href)}\n`;
+      if (isText(file) && file.size <= TEXT_INLINE_BYTES) body = `${(await file.text()).trim()}\n\n${body}`;
+      const content = await this.api.post('/api/v1/contents', {
+        title: this.titleFor(file.name.replace(/\.[^.]+$/, '')),
+        caption: this.caption.value.trim(),
+        body,
+        ...(image ? { thumbnail_attachment_id: att.id } : {}),
+      });
+      await this.api.put(`/api/v1/contents/${content.id}/attachments/${att.id}`);
+      return content;
+    });
+  }
+
+  addLink(url) {
+    let parsed;
+    try {
+      parsed = new URL(url);
+    } catch {
+      this.say('Give a full link, such as https://example.org/page.', true);
+      return;
+    }
+    if (parsed.protocol !== 'http:' && parsed.protocol !== 'https:') {
+      this.say('Only http and https links can be assigned.', true);
+      return;
+    }
+    return this.run('Adding the link', async () => {
+      const content = await this.api.post('/api/v1/contents', {
+        title: this.titleFor(parsed.hostname),
+        caption: this.caption.value.trim(),
+        body: `${mdLink(parsed.href, parsed.href)}\n`,
+      });
+      this.url.value = '';
+      return content;
+    });
+  }
+
+  async search(q) {
+    this.results.replaceChildren();
+    if (!q) return;
+    try {
+      const hits = await this.api.get(`/api/v1/search?${new URLSearchParams({ q, limit: '10' })}`);
+      if (hits.length === 0) this.results.append(el('li', 'muted', 'Nothing found.'));
+      for (const h of hits) {
+        const li = el('li');
+        li.dataset.contentId = String(h.id);
+        li.append(el('strong', null, h.title));
+        if (h.caption) li.append(el('span', 'muted', ` — ${h.caption}`));
+        const pick = el('button', 'assign-pick', 'Assign');
+        pick.type = 'button';
+        pick.addEventListener('click', () => this.run(`Assigning “${h.title}”`, async () => ({ id: h.id, title: h.title })));
+        li.append(' ', pick);
+        this.results.append(li);
+      }
+    } catch (e) {
+      this.say(e.message, true);
+    }
+  }
+}
