@@ -1,10 +1,12 @@
-// The viewer's region-selection tools (issue 6) in Debian's headless Chromium against the real
-// server with a real scan: the mask rasteriser (no antialiasing, exact fills), then as an
-// admin a lasso dragged with the mouse gives a draft whose exact highlight and vertex count
+// The viewer's region-selection tools (issue 6): the mask rasteriser (no antialiasing, exact
+// fills) and the chain of drafts (base / part_id, undo, confirm, cancel, learnt limits) in
+// Node; then in Debian's headless Chromium against the real server with a real scan, as an
+// admin: a lasso dragged with the mouse gives a draft whose exact highlight and vertex count
 // show at once without moving the camera; undo discards it; a heavy lasso that encloses
 // nothing shows the server's message; a heavy lasso, an added lasso and undo chain drafts;
 // confirming makes a part with the draft's vertex set; a dropped text file, a link and a
-// searched content are assigned to it; *Edit region* grows it; viewers get no tools.
+// searched content are assigned to it; *Edit region* grows it; markup (foreground, then
+// background with Shift, then a refining stroke) and a point part; viewers get no tools.
 
 import { after, before, describe, test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -14,9 +16,11 @@ import { join } from 'node:path';
 
 import { RoaringBitmap } from '../../static/js/parts/roaring.js';
 import { LABEL, fillPolygon, fitSize, histogram, rasterise, strokePath } from '../../static/js/select/raster.js';
+import { ApiError } from '../../static/js/select/api.js';
+import { SelectionSession } from '../../static/js/select/session.js';
 import { sampleMesh } from './support/env.mjs';
 import { ADMIN, addUser, importScan, startServer } from './support/server.mjs';
-import { launch, login, waitViewer } from './support/browser.mjs';
+import { launch, login, poll, waitViewer } from './support/browser.mjs';
 import { capture } from './support/pixels.mjs';
 import { circle, drag, dropFile, selection, shownVertexCount, surfaceCentre, waitSelection } from './support/select.mjs';
 
@@ -90,6 +94,85 @@ test('the stroke mask: exact scanline fills and swept discs, one label per pixel
   assert.equal(histogram(scaled)[4], big.width * big.height);
 });
 
+/** An API double recording the calls a session makes; drafts are d1, d2, … */
+function fakeApi() {
+  const calls = [];
+  let n = 0;
+  return {
+    calls,
+    async post(url, body) {
+      const request = body instanceof FormData ? JSON.parse(body.get('request')) : body;
+      calls.push(['POST', url, request, body instanceof FormData ? body.get('mask').type : null]);
+      n++;
+      return { id: `d${n}`, vertex_count: 10 * n, center: [0, 0, 0], base: request.base ?? null };
+    },
+    async send(method, url) {
+      calls.push([method, url]);
+      return { status: 201, json: async () => ({ id: 7, kind: 'region' }) };
+    },
+    async bytes(url) {
+      calls.push(['GET', url]);
+      return new ArrayBuffer(0);
+    },
+    async delete(url) {
+      calls.push(['DELETE', url]);
+      return null;
+    },
+  };
+}
+
+test('the draft chain: base and part_id, replacing a markup draft, undo, confirm, cancel, limits', async () => {
+  const api = fakeApi();
+  let changes = 0;
+  const session = new SelectionSession(3, api, () => changes++);
+  const mask = new Blob([new Uint8Array([137, 80, 78, 71])], { type: 'image/png' });
+  await session.select({ tool: 'lasso', mode: 'replace' }, mask);
+  await session.select({ tool: 'lasso', mode: 'add' }, mask);
+  await session.select({ tool: 'markup', mode: 'add' }, mask);
+  await session.select({ tool: 'markup', mode: 'add' }, mask, { replaceTop: true });
+  const posts = api.calls.filter((c) => c[0] === 'POST');
+  assert.deepEqual(posts.map((c) => c[1]), Array(4).fill('/api/v1/models/3/selections'));
+  assert.deepEqual(posts.map((c) => c[2].base), [undefined, 'd1', 'd2', 'd2'], 'each builds on the one before; a refined markup on the one below it');
+  assert.equal(posts[0][3], 'image/png');
+  assert.deepEqual(session.stack.map((e) => e.draft.id), ['d1', 'd2', 'd4']);
+  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d3'), 'the replaced draft is discarded');
+  assert.ok(changes >= 8);
+  assert.ok(session.undo());
+  assert.deepEqual(session.stack.map((e) => e.draft.id), ['d1', 'd2']);
+  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d4'));
+  const { part, created } = await session.confirm();
+  assert.deepEqual([part.id, created], [7, true]);
+  assert.ok(api.calls.some((c) => c[0] === 'POST' && c[1] === '/api/v1/selections/d2/confirm'));
+  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d1'), 'older drafts are discarded');
+  assert.equal(session.stack.length, 0);
+  assert.equal(session.undo(), false);
+
+  // Editing a part: the first request names it, the next build on the draft.
+  await session.edit(42);
+  await session.select({ tool: 'lasso', mode: 'subtract' }, mask);
+  await session.select({ tool: 'point', mode: 'replace', point: [1, 2] }, null);
+  const [a, b] = api.calls.filter((c) => c[0] === 'POST' && c[1].endsWith('/selections')).slice(-2);
+  assert.equal(a[2].part_id, 42);
+  assert.equal(a[2].base, undefined);
+  assert.deepEqual([b[2].base, b[2].part_id, b[3]], ['d5', undefined, null], 'the point tool is sent as plain JSON');
+  // Cancel while a request is running: its draft is dropped when it comes back.
+  const pending = session.select({ tool: 'lasso', mode: 'add' }, mask);
+  await session.cancel();
+  await assert.rejects(pending, (e) => e.cancelled === true);
+  assert.equal(session.stack.length, 0);
+  assert.equal(session.partId, null);
+  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d7'));
+
+  // A server with smaller view limits: learnt from its message.
+  const tooLarge = new ApiError(400, 'a 693x480 view is too large: at most 512 pixels a side and 200000 pixels');
+  assert.ok(session.learnLimits(tooLarge));
+  assert.deepEqual(session.limits, { maxSide: 512, maxPixels: 200000 });
+  assert.ok(!session.learnLimits(tooLarge), 'the same limits again are no news');
+  assert.ok(!session.learnLimits(new ApiError(400, 'the lasso encloses no surface of the model')));
+  const size = fitSize(693, 480, session.limits);
+  assert.ok(size.width <= 512 && size.width * size.height <= 200000, JSON.stringify(size));
+});
+
 describe('the selection tools on the real server', () => {
   let server;
   let browser;
@@ -120,6 +203,11 @@ describe('the selection tools on the real server', () => {
     if (tmp) rmSync(tmp, { recursive: true, force: true });
   });
 
+  /** Saves a screenshot when MESHWIKI_SHOTS names a directory (to look at the pages). */
+  async function shot(page, name) {
+    if (process.env.MESHWIKI_SHOTS) await page.screenshot({ path: join(process.env.MESHWIKI_SHOTS, `${name}.png`), fullPage: true });
+  }
+
   async function vertexSet(path) {
     const res = await server.api.request('GET', path, { raw: true });
     assert.equal(res.status, 200, `${path}: ${res.status}`);
@@ -136,17 +224,23 @@ describe('the selection tools on the real server', () => {
     assert.ok(await tools.isVisible(), 'no Select tools for an admin');
     const box = await page.locator('.viewer-canvas').boundingBox();
     const before = await capture(page, 'before');
-    const centre = await surfaceCentre(page, 'before');
-    assert.ok(centre.pixels > 5_000, `too little of the model in view: ${centre.pixels} pixels`);
-    const at = (p) => ({ x: box.x + p.x, y: box.y + p.y });
-    const c = at(centre);
+    let c = await surfaceCentre(page, 'before');
+    assert.ok(c.pixels > 5_000, `too little of the model in view: ${c.pixels} pixels`);
     const r = Math.min(box.width, box.height);
+    // Gestures in canvas coordinates (clicking the toolbar may scroll the page).
+    const toPage = async (points) => {
+      const canvas = page.locator('.viewer-canvas');
+      await canvas.scrollIntoViewIfNeeded();
+      const b = await canvas.boundingBox();
+      return points.map((p) => ({ x: b.x + p.x, y: b.y + p.y }));
+    };
+    const draw = async (points, options) => drag(page, await toPage(points), options);
     const camera0 = await page.evaluate(() => window.meshwikiViewer.camera());
 
     // A lasso dragged with the mouse: the draft shows at once, exact, with its vertex count.
     await tools.locator('button[data-tool=lasso]').click();
     let started = Date.now();
-    await drag(page, circle(c.x, c.y, r * 0.14));
+    await draw(circle(c.x, c.y, r * 0.14));
     let s = await waitSelection(page, (s) => s.drafts.length === 1 || s.error);
     assert.equal(s.error, '', 'the lasso failed');
     const lasso = s.drafts[0];
@@ -160,6 +254,7 @@ describe('the selection tools on the real server', () => {
     assert.deepEqual(await page.evaluate(() => window.meshwikiViewer.camera()), camera0, 'drawing moved the camera');
     assert.ok(s.matched > 0, 'no draft vertex found in the resident patches');
     const lit = await capture(page, 'lasso');
+    await shot(page, 'select-lasso');
     t.diagnostic(`tinted pixels: ${before.selected} before, ${lit.selected} with the draft`);
     assert.ok(lit.selected > before.selected + Math.max(300, lasso.selected_pixels * 0.5), `draft not highlighted: ${before.selected} → ${lit.selected} (${lasso.selected_pixels} selected)`);
 
@@ -176,17 +271,18 @@ describe('the selection tools on the real server', () => {
     await tools.locator('button[data-tool=heavy_lasso]').click();
     await tools.locator('.select-brush input').fill('24');
     await tools.locator('.select-brush input').dispatchEvent('change');
-    await drag(page, [c, { x: c.x + 12, y: c.y }]);
+    await draw([c, { x: c.x + 12, y: c.y }]);
     s = await waitSelection(page, (s) => s.error !== '');
     assert.match(s.error, /enclose/);
     const shown = page.locator('.select-error');
     assert.ok(await shown.isVisible(), 'the error is not shown');
     assert.equal((await shown.textContent()).trim(), s.error);
     assert.equal(s.drafts.length, 0);
+    await shot(page, 'select-error');
 
     // A heavy lasso around the same place, then a lasso added next to it, then undo.
     started = Date.now();
-    await drag(page, circle(c.x, c.y, r * 0.16));
+    await draw(circle(c.x, c.y, r * 0.16));
     s = await waitSelection(page, (s) => s.drafts.length === 1 || s.error !== '');
     assert.equal(s.error, '', 'the heavy lasso failed');
     const heavy = s.drafts[0];
@@ -196,12 +292,13 @@ describe('the selection tools on the real server', () => {
     assert.ok(!(await shown.isVisible()), 'the old error is still shown');
     await tools.locator('button[data-mode=add]').click();
     await tools.locator('button[data-tool=lasso]').click();
-    await drag(page, circle(c.x + r * 0.2, c.y, r * 0.07, 16));
+    await draw(circle(c.x + r * 0.2, c.y, r * 0.07, 16));
     s = await waitSelection(page, (s) => s.drafts.length === 2 || s.error !== '');
     assert.equal(s.error, '', 'the added lasso failed');
     assert.equal(s.drafts[1].base, heavy.id, 'drafts are chained through base');
     assert.equal(s.drafts[1].mode, 'add');
     assert.ok(s.drafts[1].vertex_count > heavy.vertex_count, `add did not grow: ${heavy.vertex_count} → ${s.drafts[1].vertex_count}`);
+    await shot(page, 'select-added');
     await tools.locator('button[data-action=undo]').click();
     s = await waitSelection(page, (s) => s.drafts.length === 1);
     assert.equal(await shownVertexCount(page), heavy.vertex_count);
@@ -235,6 +332,7 @@ describe('the selection tools on the real server', () => {
     await card.locator('.assign-search button[type=submit]').click();
     await card.locator(`.assign-results li[data-content-id="${existing.id}"] .assign-pick`).click();
     await card.locator('.assign-assigned li').nth(2).waitFor({ timeout: 10_000 });
+    await shot(page, 'select-assign');
     assert.doesNotMatch(await card.locator('.assign-message').getAttribute('class'), /error/, await card.locator('.assign-message').textContent());
     const assigned = await server.api.get(`/api/v1/parts/${partId}/contents`);
     assert.deepEqual(assigned.map((x) => x.title), ['Carved note', 'Reference photo archive', 'Griffin legend']);
@@ -249,12 +347,15 @@ describe('the selection tools on the real server', () => {
     await page.locator('.viewer-panel .panel-content').first().waitFor({ timeout: 10_000 });
     assert.match(await page.locator('.viewer-panel').textContent(), /Carved note/);
 
-    // Edit region: the part open in the panel grows by a lasso; confirming updates it.
+    // Edit region: the part open in the panel grows by a lasso; confirming updates it. The
+    // panel narrowed the view: find the model again.
+    await capture(page, 'panel');
+    c = await surfaceCentre(page, 'panel');
     await tools.locator('button[data-action=edit-region]').click();
     s = await waitSelection(page, (s) => s.editing === partId);
     assert.equal(s.mode, 'add');
     assert.equal(s.tool, 'lasso');
-    await drag(page, circle(c.x - r * 0.2, c.y, r * 0.07, 16));
+    await draw(circle(c.x, c.y, r * 0.25, 20));
     s = await waitSelection(page, (s) => s.drafts.length === 1 || s.error !== '');
     assert.equal(s.error, '', 'the edit failed');
     assert.equal(s.drafts[0].part_id, partId);
@@ -267,6 +368,47 @@ describe('the selection tools on the real server', () => {
     assert.equal((await server.api.get(`/api/v1/models/${model.id}/parts`)).length, 1, 'the edit made a new part');
     await page.keyboard.press('Escape');
     assert.ok(!(await card.isVisible()), 'Escape does not close the assign step');
+
+    // Markup (Lazy Snapping): a foreground stroke alone waits for the background; a background
+    // stroke (Shift) around it gives a draft; a further stroke refines that same draft.
+    await tools.locator('button[data-mode=replace]').click();
+    await tools.locator('button[data-tool=markup]').click();
+    await draw([{ x: c.x - 12, y: c.y }, { x: c.x + 12, y: c.y }]);
+    await new Promise((resolve) => setTimeout(resolve, 300));
+    s = await selection(page);
+    assert.equal(s.drafts.length + (s.busy ? 1 : 0), 0, 'markup sent without a background stroke');
+    assert.match(await page.locator('.select-status').textContent(), /background/);
+    await draw(circle(c.x, c.y, 70, 24), { modifiers: ['Shift'] });
+    s = await waitSelection(page, (s) => s.drafts.length === 1 || s.error !== '');
+    assert.equal(s.error, '', 'the markup failed');
+    const markup = s.drafts[0];
+    assert.equal(markup.tool, 'markup');
+    assert.ok(markup.vertex_count > 0);
+    await draw([{ x: c.x, y: c.y - 15 }, { x: c.x, y: c.y + 15 }]);
+    s = await waitSelection(page, (s) => (s.drafts.length === 1 && s.drafts[0].id !== markup.id) || s.error !== '');
+    assert.equal(s.error, '', 'the refined markup failed');
+    assert.equal(s.drafts.length, 1, 'a refining stroke stacked a new draft');
+    await shot(page, 'select-markup');
+    assert.ok(!s.drafts[0].base, 'the refined markup builds on the refined draft');
+    assert.equal(await page.evaluate((id) => fetch(`/api/v1/selections/${id}`).then((r) => r.status), markup.id), 404, 'the replaced markup draft still exists');
+    await tools.locator('button[data-action=undo]').click();
+    await waitSelection(page, (s) => s.drafts.length === 0);
+
+    // Point: a click gives a one-vertex draft; confirming makes a point part.
+    await tools.locator('button[data-tool=point]').click();
+    const [p] = await toPage([c]);
+    await page.mouse.click(p.x, p.y);
+    s = await waitSelection(page, (s) => s.drafts.length === 1 || s.error !== '');
+    assert.equal(s.error, '', 'the point failed');
+    assert.equal(s.drafts[0].tool, 'point');
+    assert.equal(s.drafts[0].vertex_count, 1);
+    await tools.locator('button[data-action=confirm]').click();
+    await poll(page, () => document.querySelector('.select-assign:not([hidden])')?.dataset.partId, (v) => v && Number(v) !== partId, 20_000);
+    const pointId = Number(await card.getAttribute('data-part-id'));
+    const pointPart = await server.api.get(`/api/v1/parts/${pointId}`);
+    assert.equal(pointPart.kind, 'point');
+    assert.equal(pointPart.vertex_count, 1);
+    await page.keyboard.press('Escape');
 
     // Escape leaves an active tool (and the camera moves again).
     await tools.locator('button[data-tool=markup]').click();

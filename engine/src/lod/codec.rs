@@ -8,7 +8,9 @@
 //!   vertices of coarse patches are stored at a coarser step (`2^shift` grid units) chosen
 //!   from the node's error, as Nexus quantises by a fraction of the node error.
 //! - Colours: YCoCg with 6 bits (meshoptimizer's colour filter + vertex codec; a predicted
-//!   scheme was measured and saved only ~3%).
+//!   scheme was measured and saved only ~3%). Decoded by [`decode_ycocg`] in exact integer
+//!   arithmetic: meshoptimizer's own SIMD decoder uses an approximate reciprocal, so its
+//!   results differ by one between platforms and decoders.
 //! - Normals: the decoder computes every normal from the patch's triangles (area-weighted,
 //!   exactly in f64 from the integer grid coordinates, so every decoder in every language
 //!   gets the same bits); border vertices additionally store the difference between their
@@ -32,6 +34,37 @@ const PAYLOAD_HEADER: usize = 52;
 pub const OCT_SCALE: f64 = 127.0;
 /// Bits per channel of YCoCg colours (meshoptimizer's colour filter).
 pub const COLOR_BITS: i32 = 6;
+
+/// Inverts meshoptimizer's colour filter (`meshopt_encodeFilterColor`) in place: YCoCg with
+/// the scale in alpha's high bit back to RGBA8, rounding exactly (`docs/FORMAT.md`), so every
+/// decoder in every language gets the same bytes.
+pub fn decode_ycocg(colors: &mut [[u8; 4]]) {
+    for c in colors {
+        let a_raw = i32::from(c[3]);
+        // The scale is the alpha's highest set bit, smeared down: 2^bits - 1.
+        let mut scale = a_raw;
+        scale |= scale >> 1;
+        scale |= scale >> 2;
+        scale |= scale >> 4;
+        let y = i32::from(c[0]);
+        let co = i32::from(c[1] as i8);
+        let cg = i32::from(c[2] as i8);
+        let a = ((a_raw << 1) & scale) | (a_raw & 1);
+        let expand = |v: i32| -> u8 {
+            if scale == 0 || v <= 0 {
+                0
+            } else {
+                ((2 * v * 255 + scale) / (2 * scale)).min(255) as u8
+            }
+        };
+        *c = [
+            expand(y + co - cg),
+            expand(y + cg),
+            expand(y - co - cg),
+            expand(a),
+        ];
+    }
+}
 /// Octahedral coordinates of a unit vector, rounded with `floor(x + 0.5)` (the same in every
 /// language).
 pub fn oct_encode(n: [f64; 3]) -> [i64; 2] {
@@ -588,7 +621,7 @@ pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
     let colors = if flags & FLAG_COLORS != 0 {
         let mut c: Vec<[u8; 4]> =
             decode_vertex_buffer(col_s, n).map_err(|_| CodecError::Stream("colors"))?;
-        meshopt::decode_filter_color(&mut c);
+        decode_ycocg(&mut c);
         c
     } else {
         Vec::new()
@@ -696,6 +729,40 @@ mod tests {
             .collect();
         t.sort();
         t
+    }
+
+    #[test]
+    fn colour_decoding_rounds_exactly_and_inverts_the_filter() {
+        // Every (y, co, cg) the 6-bit filter produces, against the exact rational value.
+        let mut all = Vec::new();
+        for y in 0..64u8 {
+            for co in -32i8..32 {
+                for cg in -32i8..32 {
+                    all.push([y, co as u8, cg as u8, 0b10_0000 | (y & 31)]);
+                }
+            }
+        }
+        let mut decoded = all.clone();
+        decode_ycocg(&mut decoded);
+        for (raw, out) in all.iter().zip(&decoded) {
+            let (y, co, cg) = (raw[0] as f64, raw[1] as i8 as f64, raw[2] as i8 as f64);
+            let a = (((raw[3] as i32) << 1) & 63) | (raw[3] as i32 & 1);
+            let want = [y + co - cg, y + cg, y - co - cg, a as f64]
+                .map(|v| (v * 255.0 / 63.0).round().clamp(0.0, 255.0) as u8);
+            assert_eq!(*out, want, "{raw:?}");
+        }
+        // And the filter's round trip stays within its 6-bit precision.
+        let colours: Vec<[u8; 4]> = (0..4096u32)
+            .map(|i| [(i * 7) as u8, (i * 13 >> 2) as u8, (i >> 4) as u8, 255])
+            .collect();
+        let unit: Vec<[f32; 4]> = colours.iter().map(|c| c.map(|x| x as f32 / 255.0)).collect();
+        let mut back: Vec<[u8; 4]> = meshopt::encode_filter_color(&unit, COLOR_BITS);
+        decode_ycocg(&mut back);
+        for (c, b) in colours.iter().zip(&back) {
+            for k in 0..4 {
+                assert!((c[k] as i32 - b[k] as i32).abs() <= 6, "{c:?} -> {b:?}");
+            }
+        }
     }
 
     #[test]

@@ -95,7 +95,7 @@ impl Meshwiki {
     }
 
     /// `serve --bind 127.0.0.1:0`, waiting until it listens.
-    pub fn serve(&self) -> Result<Server> {
+    pub fn serve(&self) -> Result<Running> {
         let mut child = self
             .command(&["serve", "--bind", "127.0.0.1:0", "--workers", "2"])?
             .stdin(Stdio::null())
@@ -312,17 +312,23 @@ impl Api {
         parse_vertex_buffer(&r.body, c.width as usize * c.height as usize)
     }
 
-    /// `POST /api/v1/models/{id}/selections` with `tool` and the stroke mask PNG. `Ok(Err)`
-    /// is the server's refusal (a 4xx and its message).
+    /// `POST /api/v1/models/{id}/selections` with `tool` and the stroke mask PNG; with `base`
+    /// (a previous draft) the strokes are subtracted from it. `Ok(Err)` is the server's
+    /// refusal (a 4xx and its message).
     pub fn select(
         &self,
         model: i64,
         tool: &str,
         camera: &Camera,
         mask_png: &[u8],
+        base: Option<&str>,
     ) -> Result<std::result::Result<Draft, String>> {
         let boundary = "----meshwikibenchselect4b1d";
-        let request = json!({"tool": tool, "camera": camera_json(camera)});
+        let mut request = json!({"tool": tool, "camera": camera_json(camera)});
+        if let Some(b) = base {
+            request["mode"] = json!("subtract");
+            request["base"] = json!(b);
+        }
         let mut body = format!(
             "--{boundary}\r\nContent-Disposition: form-data; name=\"request\"\r\n\
              Content-Type: application/json\r\n\r\n{request}\r\n--{boundary}\r\n\
@@ -356,21 +362,35 @@ impl Api {
         }
     }
 
-    /// The draft's vertex set (`GET /api/v1/selections/{draft}/vertices`), then discards it.
-    pub fn take_vertices(&self, draft: &str) -> Result<RoaringBitmap> {
+    /// The draft's selected pixels as a PNG (`GET /api/v1/selections/{draft}/mask`).
+    pub fn selection_png(&self, draft: &str) -> Result<Vec<u8>> {
+        let path = format!("/api/v1/selections/{draft}/mask");
+        let r = self.send("GET", &path, None, Vec::new())?;
+        if r.status != 200 {
+            bail!("GET {path}: {} {}", r.status, r.text());
+        }
+        Ok(r.body)
+    }
+
+    /// The draft's vertex set (`GET /api/v1/selections/{draft}/vertices`).
+    pub fn vertices(&self, draft: &str) -> Result<RoaringBitmap> {
         let path = format!("/api/v1/selections/{draft}/vertices");
         let r = self.send("GET", &path, None, Vec::new())?;
         if r.status != 200 {
             bail!("GET {path}: {} {}", r.status, r.text());
         }
-        let set = RoaringBitmap::deserialize_from(&r.body[..])
-            .with_context(|| format!("GET {path}: not a serialised RoaringBitmap"))?;
+        RoaringBitmap::deserialize_from(&r.body[..])
+            .with_context(|| format!("GET {path}: not a serialised RoaringBitmap"))
+    }
+
+    /// Discards a draft (`DELETE /api/v1/selections/{draft}`).
+    pub fn discard(&self, draft: &str) -> Result<()> {
         let path = format!("/api/v1/selections/{draft}");
         let r = self.send("DELETE", &path, None, Vec::new())?;
         if r.status != 204 {
             tracing::warn!(status = r.status, "DELETE {path}: {}", r.text());
         }
-        Ok(set)
+        Ok(())
     }
 }
 

@@ -1,8 +1,14 @@
 //! One ground-truth region through the real selection API (system paper §4.3's measure):
 //! a camera that frames it, its visible vertices and on-screen mask, each simulated tool's
 //! strokes submitted, and `|selected Δ truth| / |truth|` for each.
+//!
+//! Vertices on the segment boundary belong to the region and to its neighbour (a `.seg`
+//! labels faces): selecting them or not is right either way, so they are not counted as
+//! mis-selected (`error`); `strict_error` counts them.
 
-use anyhow::Result;
+use std::path::Path;
+
+use anyhow::{Context, Result};
 use glam::{Quat, Vec3};
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::render::best_view::{BestViewOptions, framing_camera};
@@ -31,14 +37,19 @@ pub const TOOLS: [(&str, &str); 4] = [
 #[derive(Debug, Clone, Serialize)]
 pub struct ToolResult {
     pub tool: &'static str,
-    /// `|S Δ T| / |T|` (1 when the server refused the strokes: nothing selected).
+    /// `|(S Δ T) \ boundary| / |T|` (1 when the server refused the strokes: nothing
+    /// selected).
     pub error: f64,
+    /// `|S Δ T| / |T|`.
+    pub strict_error: f64,
     pub false_positives: u64,
     pub false_negatives: u64,
     pub selected: u64,
-    /// Wall time of the POST, milliseconds (absent when refused).
-    pub latency_ms: Option<f64>,
-    pub server_ms: Option<f64>,
+    /// Strokes sent (a second one subtracts the holes of the region's outline).
+    pub strokes: usize,
+    /// Wall time of each POST, milliseconds (none when the first was refused).
+    pub latency_ms: Vec<f64>,
+    pub server_ms: Vec<f64>,
     /// The server's message when it refused the strokes.
     pub refused: Option<String>,
 }
@@ -117,44 +128,139 @@ fn frame(api: &Api, model: i64, seg: &Segmentation, region: &Region, w: u32, h: 
     Ok(framing_camera(region.center, dir, region.extent, &opts, w, h))
 }
 
-fn score(tool: &'static str, truth: &RoaringBitmap, got: Result<(RoaringBitmap, f64, f64), String>) -> ToolResult {
-    let (set, latency, server, refused) = match got {
-        Ok((s, l, sv)) => (s, Some(l), Some(sv), None),
-        Err(msg) => (RoaringBitmap::new(), None, None, Some(msg)),
-    };
-    let fp = set.difference_len(truth);
-    let fneg = truth.difference_len(&set);
+/// What a tool's strokes gave: the selected vertices, each POST's latency and server time,
+/// or the server's refusal of the first stroke.
+struct Submitted {
+    set: RoaringBitmap,
+    latency_ms: Vec<f64>,
+    server_ms: Vec<f64>,
+    refused: Option<String>,
+}
+
+fn score(tool: &'static str, truth: &RoaringBitmap, boundary: &RoaringBitmap, got: &Submitted) -> ToolResult {
+    let extra = &got.set - truth;
+    let missed = truth - &got.set;
+    let fp = extra.difference_len(boundary);
+    let fneg = missed.difference_len(boundary);
+    let n = truth.len().max(1) as f64;
     ToolResult {
         tool,
-        error: (fp + fneg) as f64 / truth.len().max(1) as f64,
+        error: (fp + fneg) as f64 / n,
+        strict_error: (extra.len() + missed.len()) as f64 / n,
         false_positives: fp,
         false_negatives: fneg,
-        selected: set.len(),
-        latency_ms: latency,
-        server_ms: server,
-        refused,
+        selected: got.set.len(),
+        strokes: got.latency_ms.len(),
+        latency_ms: got.latency_ms.clone(),
+        server_ms: got.server_ms.clone(),
+        refused: got.refused.clone(),
     }
 }
 
-/// Submits one stroke mask as `tool` and fetches the draft's vertices.
+/// Submits the strokes of one tool — the first replaces, the others (around holes) are
+/// subtracted from the draft so far — and fetches the final draft's vertices. With `dump`,
+/// each step's selected pixels are written there with the strokes and the region.
 fn submit(
     api: &Api,
     model: i64,
     tool: &str,
     camera: &Camera,
-    labels: Vec<u8>,
-) -> Result<std::result::Result<(RoaringBitmap, f64, f64), String>> {
-    let m = StrokeMask::new(camera.width, camera.height, labels)?;
-    Ok(match api.select(model, tool, camera, &m.encode_png())? {
-        Ok(d) => {
-            let set = api.take_vertices(&d.id)?;
-            if set.len() != d.vertex_count {
-                tracing::warn!(draft = %d.id, "vertex count {} but {} vertices", d.vertex_count, set.len());
+    steps: Vec<Vec<u8>>,
+    dump: Option<(&Path, &[bool], &[bool])>,
+) -> Result<Submitted> {
+    let mut out = Submitted {
+        set: RoaringBitmap::new(),
+        latency_ms: Vec::new(),
+        server_ms: Vec::new(),
+        refused: None,
+    };
+    let mut draft: Option<String> = None;
+    let mut count = 0;
+    for (k, labels) in steps.into_iter().enumerate() {
+        let m = StrokeMask::new(camera.width, camera.height, labels)?;
+        match api.select(model, tool, camera, &m.encode_png(), draft.as_deref())? {
+            Ok(d) => {
+                if let Some((path, region, covered)) = dump {
+                    let png = api.selection_png(&d.id)?;
+                    let path = if k == 0 {
+                        path.to_path_buf()
+                    } else {
+                        path.with_extension(format!("{}.png", k + 1))
+                    };
+                    write_dump(&path, &m, region, covered, &png)?;
+                }
+                count = d.vertex_count;
+                out.latency_ms.push(d.latency_ms);
+                out.server_ms.push(d.server_ms);
+                if let Some(old) = draft.replace(d.id) {
+                    api.discard(&old)?;
+                }
             }
-            Ok((set, d.latency_ms, d.server_ms))
+            // A refused first stroke selects nothing; a refused later one changes nothing.
+            Err(msg) => {
+                tracing::info!(tool, step = k + 1, "refused: {msg}");
+                if k == 0 {
+                    out.refused = Some(msg);
+                    return Ok(out);
+                }
+            }
         }
-        Err(msg) => Err(msg),
-    })
+    }
+    if let Some(d) = draft {
+        out.set = api.vertices(&d)?;
+        if out.set.len() != count {
+            tracing::warn!(draft = %d, "the draft has {count} vertices but its set {}", out.set.len());
+        }
+        api.discard(&d)?;
+    }
+    Ok(out)
+}
+
+/// Writes a picture of a selection: the model grey, the region green, the selected pixels
+/// blue, the strokes red (heavy band, lasso outline), yellow (foreground) and magenta
+/// (background).
+fn write_dump(
+    path: &Path,
+    strokes: &StrokeMask,
+    region: &[bool],
+    covered: &[bool],
+    selection_png: &[u8],
+) -> Result<()> {
+    let sel = image::load_from_memory_with_format(selection_png, image::ImageFormat::Png)
+        .context("the selection mask is not a PNG")?
+        .to_rgba8();
+    let (w, h) = (strokes.width, strokes.height);
+    let l = &strokes.labels;
+    let mut img = image::RgbImage::new(w, h);
+    for (x, y, p) in img.enumerate_pixels_mut() {
+        let i = (y * w + x) as usize;
+        let mut c = if covered[i] { [90u8, 90, 90] } else { [20, 20, 20] };
+        if region[i] {
+            c[1] = 150;
+        }
+        if sel.get_pixel(x, y).0[3] > 0 {
+            c[2] = 255;
+        }
+        let lasso_edge = l[i] == mask::LASSO
+            && [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)].iter().any(|(dx, dy)| {
+                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                nx >= 0
+                    && ny >= 0
+                    && nx < w as i64
+                    && ny < h as i64
+                    && l[(ny as u32 * w + nx as u32) as usize] != mask::LASSO
+            });
+        match l[i] {
+            mask::HEAVY => c[0] = 200,
+            mask::FOREGROUND => c = [255, 255, 0],
+            mask::BACKGROUND => c = [255, 0, 255],
+            _ if lasso_edge => c = [255, 0, 0],
+            _ => {}
+        }
+        *p = image::Rgb(c);
+    }
+    img.save(path)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// What one region is evaluated with.
@@ -168,6 +274,8 @@ pub struct Case<'a> {
     pub height: u32,
     pub user: UserModel,
     pub seed: u64,
+    /// Write pictures of every selection here.
+    pub dump: Option<&'a Path>,
 }
 
 /// Evaluates every tool on one region.
@@ -181,10 +289,7 @@ pub fn region(c: &Case<'_>) -> Result<std::result::Result<RegionResult, Skip>> {
 
     // Visible ground truth: what a lasso over the whole view selects, within the region.
     let whole = vec![mask::LASSO; w * h];
-    let visible = match submit(c.api, c.model_id, "lasso", &camera, whole)? {
-        Ok((set, _, _)) => set,
-        Err(_) => RoaringBitmap::new(),
-    };
+    let visible = submit(c.api, c.model_id, "lasso", &camera, vec![whole], None)?.set;
     let truth = &visible & &c.region.vertices;
     if pixels < MIN_PIXELS || truth.len() < MIN_VISIBLE {
         return Ok(Err(Skip::BarelyVisible {
@@ -201,13 +306,21 @@ pub fn region(c: &Case<'_>) -> Result<std::result::Result<RegionResult, Skip>> {
         .map(|&b| if b { mask::LASSO } else { mask::NONE })
         .collect();
     let mut tools = Vec::new();
-    for ((name, _), labels) in TOOLS.iter().zip([s.heavy_lasso, s.markup, s.lasso, exact]) {
+    let steps = |first: Vec<u8>, holes: Option<Vec<u8>>| [Some(first), holes].into_iter().flatten().collect();
+    let all: [Vec<Vec<u8>>; 4] = [
+        steps(s.heavy_lasso, s.heavy_lasso_holes),
+        vec![s.markup],
+        steps(s.lasso, s.lasso_holes),
+        vec![exact],
+    ];
+    for ((name, _), labels) in TOOLS.iter().zip(all) {
         let api_tool = if *name == "exact_mask" { "lasso" } else { *name };
-        let got = submit(c.api, c.model_id, api_tool, &camera, labels)?;
-        if let Err(msg) = &got {
-            tracing::info!(model = c.psb_id, segment = c.region.segment, tool = name, "refused: {msg}");
-        }
-        tools.push(score(name, &truth, got));
+        let file = c
+            .dump
+            .map(|d| d.join(format!("{}_{}_{name}.png", c.psb_id, c.region.segment)));
+        let dump = file.as_deref().map(|f| (f, &on_screen[..], &covered[..]));
+        let got = submit(c.api, c.model_id, api_tool, &camera, labels, dump)?;
+        tools.push(score(name, &truth, &c.region.shared, &got));
     }
     tracing::debug!(
         model = c.psb_id,

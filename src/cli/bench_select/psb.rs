@@ -362,6 +362,8 @@ pub fn read_seg(path: &Path, faces: usize) -> Result<Vec<u32>> {
 pub struct Region {
     pub segment: u32,
     pub vertices: RoaringBitmap,
+    /// Its vertices on the segment boundary (they also belong to a neighbouring segment).
+    pub shared: RoaringBitmap,
     pub center: Vec3,
     /// Area-weighted mean normal (zero when it cancels out).
     pub normal: Vec3,
@@ -374,8 +376,6 @@ pub struct Region {
 pub struct Segmentation {
     pub regions: Vec<Region>,
     pub vertex_segment: Vec<u32>,
-    /// Vertices used by some face.
-    pub vertices: u64,
     /// Segments left out for being under the size threshold.
     pub tiny: usize,
 }
@@ -403,6 +403,9 @@ pub fn segment(mesh: &Mesh, labels: &[u32], min_share: f64) -> Segmentation {
         })
         .collect();
     let used = counts.iter().filter(|c| !c.is_empty()).count() as u64;
+    let shared: RoaringBitmap = (0..counts.len() as u32)
+        .filter(|&v| counts[v as usize].len() > 1)
+        .collect();
     let mut tiny = 0;
     let mut regions = Vec::new();
     for (segment, (vertices, normal)) in per_segment {
@@ -422,6 +425,7 @@ pub fn segment(mesh: &Mesh, labels: &[u32], min_share: f64) -> Segmentation {
             .fold(0.0, f32::max);
         regions.push(Region {
             segment,
+            shared: &vertices & &shared,
             vertices,
             center,
             normal: normal.normalize_or_zero(),
@@ -431,7 +435,6 @@ pub fn segment(mesh: &Mesh, labels: &[u32], min_share: f64) -> Segmentation {
     Segmentation {
         regions,
         vertex_segment,
-        vertices: used,
         tiny,
     }
 }
@@ -461,6 +464,7 @@ mod tests {
         assert_eq!(s.regions[0].vertices.iter().collect::<Vec<_>>(), [0, 1, 2, 3]);
         assert_eq!(s.regions[1].vertices.iter().collect::<Vec<_>>(), [1, 2, 4, 5]);
         assert!((s.regions[0].normal - Vec3::Z).length() < 1e-6);
+        assert_eq!(s.regions[0].shared.iter().collect::<Vec<_>>(), [1, 2]);
         assert_eq!(s.vertex_segment[4], 1);
         assert_eq!(s.vertex_segment[0], 0);
         assert!(read_seg(&seg, 4).is_err());

@@ -7,6 +7,9 @@
 //! - a **markup**: a few foreground strokes well inside the region and a few background
 //!   strokes on the surface around it (Lazy Snapping's markers), kept away from the outline.
 //!
+//! Where the region borders the background (a silhouette) the strokes pass a little outside
+//! it, as a user does where nothing else could be caught; holes in the outline (other
+//! surface seen through the region) get a second, subtracting stroke of the same tool.
 //! The outline is the zero level of the region's signed distance field; the jitter is a sum of
 //! plane waves (wavelengths 60–240 px), so the outline is displaced along its normal by a
 //! smooth function of position whose RMS is `jitter / √2` — a sine of amplitude `jitter`.
@@ -219,11 +222,8 @@ fn components(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, Vec<usize>) {
     (label, sizes)
 }
 
-/// What a user traces: the region's on-screen mask with its holes filled (one stroke follows
-/// an outer outline) and without specks (components under 2 % of it, or under 50 pixels,
-/// that no one would circle).
-pub fn traced_outline(region: &[bool], w: usize, h: usize) -> Vec<bool> {
-    // Holes: pixels not in the region that the image border cannot reach (4-connected).
+/// Pixels not in `region` that the image border cannot reach (4-connected): its holes.
+fn fill_holes(region: &[bool], w: usize, h: usize) -> Vec<bool> {
     let mut reach = vec![false; region.len()];
     let mut stack: Vec<usize> = Vec::new();
     let push = |i: usize, reach: &mut Vec<bool>, stack: &mut Vec<usize>| {
@@ -255,15 +255,36 @@ pub fn traced_outline(region: &[bool], w: usize, h: usize) -> Vec<bool> {
             push(i + w, &mut reach, &mut stack);
         }
     }
-    let filled: Vec<bool> = reach.iter().map(|&r| !r).collect();
-    let (label, sizes) = components(&filled, w, h);
-    let total: usize = sizes.iter().sum();
-    let keep = (total / 50).max(50);
-    filled
+    reach.iter().map(|&r| !r).collect()
+}
+
+/// The components of `mask` holding at least `keep` pixels of `count`.
+fn large_components(mask: &[bool], count: &[bool], keep: usize, w: usize, h: usize) -> Vec<bool> {
+    let (label, sizes) = components(mask, w, h);
+    let mut weight = vec![0usize; sizes.len()];
+    for (i, &l) in label.iter().enumerate() {
+        if l != u32::MAX && count[i] {
+            weight[l as usize] += 1;
+        }
+    }
+    label
         .iter()
-        .zip(&label)
-        .map(|(&f, &l)| f && sizes.get(l as usize).is_some_and(|&s| s >= keep))
+        .map(|&l| l != u32::MAX && weight[l as usize] >= keep)
         .collect()
+}
+
+/// What a user traces: the region's on-screen mask with its holes filled (one stroke follows
+/// an outer outline) and without specks (components under 2 % of it, or under 50 pixels,
+/// that no one would circle); and the holes worth a second, subtracting stroke (those with as
+/// many pixels of surface).
+pub fn traced_outline(region: &[bool], covered: &[bool], w: usize, h: usize) -> (Vec<bool>, Vec<bool>) {
+    let filled = fill_holes(region, w, h);
+    let total = region.iter().filter(|&&b| b).count();
+    let keep = (total / 50).max(50);
+    let outline = large_components(&filled, &filled, keep, w, h);
+    let holes: Vec<bool> = (0..w * h).map(|i| outline[i] && !region[i]).collect();
+    let holes = large_components(&holes, covered, keep, w, h);
+    (outline, holes)
 }
 
 /// The strokes of one region, ready to be sent (one label per pixel).
@@ -271,6 +292,9 @@ pub fn traced_outline(region: &[bool], w: usize, h: usize) -> Vec<bool> {
 pub struct Strokes {
     pub heavy_lasso: Vec<u8>,
     pub lasso: Vec<u8>,
+    /// Second strokes around the holes (subtracted), when there are any.
+    pub heavy_lasso_holes: Option<Vec<u8>>,
+    pub lasso_holes: Option<Vec<u8>>,
     pub markup: Vec<u8>,
     /// Width of the heavy band drawn (narrower than asked around thin regions).
     pub band_px: f32,
@@ -288,6 +312,26 @@ pub struct UserModel {
     pub band: f32,
 }
 
+/// The heavy band and the lasso along the jittered outline of `inside`, and the band's width.
+fn along_outline(inside: &[bool], jitter: &Jitter, user: UserModel, w: usize, h: usize) -> (Vec<u8>, Vec<u8>, f32) {
+    let sd = signed_distance(inside, w, h);
+    let offset: Vec<f32> = (0..w * h)
+        .map(|i| sd[i] + jitter.at((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
+        .collect();
+    // A thin part gets a thinner stroke: the band must leave some of the inside enclosed.
+    let half_thickness = sd.iter().copied().fold(0.0f32, f32::max);
+    let band = user.band.min((half_thickness - user.jitter).max(4.0));
+    let heavy = offset
+        .iter()
+        .map(|&o| if o.abs() < band * 0.5 { mask::HEAVY } else { mask::NONE })
+        .collect();
+    let lasso = offset
+        .iter()
+        .map(|&o| if o > 0.0 { mask::LASSO } else { mask::NONE })
+        .collect();
+    (heavy, lasso, band)
+}
+
 /// Draws the three tools' strokes for the region mask `region` on a view whose pixels showing
 /// the model are `covered`.
 pub fn draw(
@@ -298,25 +342,30 @@ pub fn draw(
     user: UserModel,
     rng: &mut Rng,
 ) -> Strokes {
-    let traced = traced_outline(region, w, h);
-    let sd = signed_distance(&traced, w, h);
+    // Where the region borders empty background there is nothing to miss: users sweep a
+    // little outside the silhouette there (but not onto other surface across a narrow gap).
+    let margin = user.band * 0.5 + 2.0 * user.jitter;
+    let other: Vec<bool> = (0..w * h).map(|i| covered[i] && !region[i]).collect();
+    let to_region = distance_sq(region, w, h);
+    let to_other = distance_sq(&other, w, h);
+    let swept: Vec<bool> = (0..w * h)
+        .map(|i| {
+            region[i]
+                || (!covered[i] && to_region[i] <= margin * margin && to_other[i] > margin * margin)
+        })
+        .collect();
+    let (traced, holes) = traced_outline(&swept, covered, w, h);
     let jitter = Jitter::new(rng, user.jitter);
-    let offset: Vec<f32> = (0..w * h)
-        .map(|i| sd[i] + jitter.at((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
-        .collect();
-    // A thin part gets a thinner stroke: the band must leave some of the inside enclosed.
-    let half_thickness = sd.iter().copied().fold(0.0f32, f32::max);
-    let band = user.band.min((half_thickness - user.jitter).max(4.0));
-    let heavy_lasso = offset
-        .iter()
-        .map(|&o| if o.abs() < band * 0.5 { mask::HEAVY } else { mask::NONE })
-        .collect();
-    let lasso = offset
-        .iter()
-        .map(|&o| if o > 0.0 { mask::LASSO } else { mask::NONE })
-        .collect();
+    let (heavy_lasso, lasso, band) = along_outline(&traced, &jitter, user, w, h);
+    let (heavy_lasso_holes, lasso_holes) = if holes.iter().any(|&b| b) {
+        let (hh, lh, _) = along_outline(&holes, &jitter, user, w, h);
+        (Some(hh), Some(lh))
+    } else {
+        (None, None)
+    };
 
-    // Markup: keep as far from the outline as the heavy band's inner and outer edges.
+    // Markup: keep as far from the outline as the heavy band's inner and outer edges; spread
+    // the strokes around the region.
     let away = band * 0.5 + user.jitter;
     let region_sd = signed_distance(region, w, h);
     let mut fg_area: Vec<bool> = region_sd.iter().map(|&d| d > away).collect();
@@ -325,18 +374,30 @@ pub fn draw(
         fg_area = region_sd.iter().map(|&d| d >= deepest * 0.6 && d > 0.0).collect();
     }
     let near = |d: f32| d < -away && d > -(away + 80.0);
-    let mut bg_area: Vec<bool> = (0..w * h).map(|i| covered[i] && near(sd[i])).collect();
+    let mut bg_area: Vec<bool> = (0..w * h).map(|i| covered[i] && near(region_sd[i])).collect();
     if !bg_area.iter().any(|&b| b) {
-        bg_area = (0..w * h).map(|i| covered[i] && sd[i] < -away).collect();
+        bg_area = (0..w * h).map(|i| covered[i] && region_sd[i] < -away).collect();
     }
+    let (mut cx, mut cy, mut n) = (0.0f64, 0.0f64, 0usize);
+    for (i, _) in region.iter().enumerate().filter(|(_, b)| **b) {
+        cx += (i % w) as f64;
+        cy += (i / w) as f64;
+        n += 1;
+    }
+    let centre = ((cx / n.max(1) as f64) as f32, (cy / n.max(1) as f64) as f32);
     let mut markup = vec![mask::NONE; w * h];
-    let fg_len = ((fg_area.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
-    let bg_len = ((bg_area.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
-    let markup_fg = strokes(&mut markup, &fg_area, mask::FOREGROUND, 3, fg_len, w, h, rng);
-    let markup_bg = strokes(&mut markup, &bg_area, mask::BACKGROUND, 4, bg_len, w, h, rng);
+    let len = |a: &[bool]| ((a.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
+    let (fg_len, bg_len) = (len(&fg_area), len(&bg_area));
+    let mut paint = |area: &[bool], label, count, length, rng: &mut Rng| {
+        strokes(&mut markup, area, label, count, length, centre, (w, h), rng)
+    };
+    let markup_fg = paint(&fg_area, mask::FOREGROUND, 3, fg_len, rng);
+    let markup_bg = paint(&bg_area, mask::BACKGROUND, 6, bg_len, rng);
     Strokes {
         heavy_lasso,
         lasso,
+        heavy_lasso_holes,
+        lasso_holes,
         markup,
         band_px: band,
         markup_fg,
@@ -345,7 +406,8 @@ pub fn draw(
 }
 
 /// Paints `count` smooth random strokes of about `length` pixels within `area` with `label`
-/// (brush radius 2 px); returns the pixels painted.
+/// (brush radius 2 px), starting in successive angular sectors around `centre`; returns the
+/// pixels painted.
 #[allow(clippy::too_many_arguments)]
 fn strokes(
     out: &mut [u8],
@@ -353,14 +415,19 @@ fn strokes(
     label: u8,
     count: usize,
     length: f32,
-    w: usize,
-    h: usize,
+    centre: (f32, f32),
+    (w, h): (usize, usize),
     rng: &mut Rng,
 ) -> usize {
     let pixels: Vec<usize> = (0..area.len()).filter(|&i| area[i]).collect();
     if pixels.is_empty() {
         return 0;
     }
+    let sector = |i: usize| {
+        let a = ((i / w) as f32 - centre.1).atan2((i % w) as f32 - centre.0);
+        let t = (a + std::f32::consts::PI) / std::f32::consts::TAU;
+        ((t * count as f32) as usize).min(count - 1)
+    };
     let inside = |x: f32, y: f32| {
         x >= 0.0
             && y >= 0.0
@@ -388,8 +455,10 @@ fn strokes(
         }
     };
     const STEP: f32 = 1.5;
-    for _ in 0..count {
-        let start = pixels[rng.index(pixels.len())];
+    for k in 0..count {
+        let in_sector: Vec<usize> = pixels.iter().copied().filter(|&i| sector(i) == k).collect();
+        let from = if in_sector.is_empty() { &pixels } else { &in_sector };
+        let start = from[rng.index(from.len())];
         let (mut x, mut y) = ((start % w) as f32 + 0.5, (start / w) as f32 + 0.5);
         let mut heading = rng.range(0.0, std::f32::consts::TAU);
         let mut travelled = 0.0;
@@ -488,7 +557,9 @@ mod tests {
             region[i] &= !hole[i];
         }
         region[5 * w + 5] = true;
-        let t = traced_outline(&region, w, h);
+        let covered = vec![true; w * h];
+        let (t, holes) = traced_outline(&region, &covered, w, h);
         assert!(t[50 * w + 60] && !t[5 * w + 5]);
+        assert!(holes[50 * w + 60] && !holes[50 * w + 40]);
     }
 }

@@ -253,6 +253,32 @@ export function octDecode(qx, qy, out, at) {
 }
 
 /**
+ * Inverts meshoptimizer's colour filter in place (YCoCg, scale in alpha's high bit) with exact
+ * integer rounding, byte for byte as the engine's `decode_ycocg` (meshoptimizer's own SIMD
+ * decoder rounds through an approximate reciprocal, so it differs by one across platforms).
+ * @param {Uint8Array} c RGBA8 values, 4 per vertex
+ */
+export function decodeYCoCg(c) {
+  for (let i = 0; i < c.length; i += 4) {
+    const aRaw = c[i + 3];
+    let scale = aRaw;
+    scale |= scale >> 1;
+    scale |= scale >> 2;
+    scale |= scale >> 4;
+    const y = c[i];
+    const co = (c[i + 1] << 24) >> 24;
+    const cg = (c[i + 2] << 24) >> 24;
+    const a = ((aRaw << 1) & scale) | (aRaw & 1);
+    const expand = (v) =>
+      scale === 0 || v <= 0 ? 0 : Math.min(255, Math.floor((2 * v * 255 + scale) / (2 * scale)));
+    c[i] = expand(y + co - cg);
+    c[i + 1] = expand(y + cg);
+    c[i + 2] = expand(y - co - cg);
+    c[i + 3] = expand(a);
+  }
+}
+
+/**
  * Decodes one patch blob.
  * @param {Uint8Array} blob
  * @param {{origin: number[], step: number}} grid the model grid (header)
@@ -358,10 +384,11 @@ export function decodePatch(blob, grid, deps) {
     colors = new Uint8Array(n * 4);
     if (n > 0) {
       try {
-        meshopt.decodeVertexBuffer(colors, n, 4, colS, 'COLOR');
+        meshopt.decodeVertexBuffer(colors, n, 4, colS);
       } catch {
         throw new DecodeError('stream colors does not decode');
       }
+      decodeYCoCg(colors);
     }
   }
   let normals = null;

@@ -39,36 +39,46 @@ function isText(file) {
 
 export class AssignStep {
   /**
-   * @param {HTMLElement} stage where the card shows and files may be dropped
+   * @param {HTMLElement} host the viewer, where the step shows in the information panel's place
+   * @param {HTMLElement} stage the 3D view: files dropped onto the region land there
    * @param {import('./api.js').Api} api
-   * @param {{assigned: (partId: number, content: object) => void, closed: () => void}} handlers
+   * @param {{assigned: (partId: number, content: object) => void,
+   *   closed: (partId: number) => void}} handlers `closed`: the user is done
    */
-  constructor(stage, api, handlers) {
+  constructor(host, stage, api, handlers) {
     this.stage = stage;
     this.api = api;
     this.handlers = handlers;
     this.partId = null;
-    this.root = el('section', 'select-assign');
+    this.root = el('aside', 'select-assign');
     this.root.hidden = true;
-    stage.appendChild(this.root);
+    host.appendChild(this.root);
     this.onDragOver = (e) => {
       if (!this.isOpen() || !e.dataTransfer || ![...e.dataTransfer.types].includes('Files')) return;
       e.preventDefault();
       e.dataTransfer.dropEffect = 'copy';
-      this.stage.classList.add('drop-target');
+      this.setDropTarget(true);
     };
     this.onDragLeave = (e) => {
-      if (e.target === this.stage || !this.stage.contains(e.relatedTarget)) this.stage.classList.remove('drop-target');
+      if (!e.currentTarget.contains(e.relatedTarget)) this.setDropTarget(false);
     };
     this.onDrop = (e) => {
       if (!this.isOpen() || !e.dataTransfer || e.dataTransfer.files.length === 0) return;
       e.preventDefault();
-      this.stage.classList.remove('drop-target');
+      this.setDropTarget(false);
       this.addFiles([...e.dataTransfer.files]);
     };
-    stage.addEventListener('dragover', this.onDragOver);
-    stage.addEventListener('dragleave', this.onDragLeave);
-    stage.addEventListener('drop', this.onDrop);
+    for (const target of [stage, this.root]) {
+      target.addEventListener('dragover', this.onDragOver);
+      target.addEventListener('dragleave', this.onDragLeave);
+      target.addEventListener('drop', this.onDrop);
+    }
+  }
+
+  /** Marks the region and the drop zone while files are dragged over them. */
+  setDropTarget(on) {
+    this.stage.classList.toggle('drop-target', on);
+    this.root.classList.toggle('drop-target', on);
   }
 
   isOpen() {
@@ -147,13 +157,19 @@ export class AssignStep {
     this.title.focus();
   }
 
+  /** Ends the step (Done, Escape): the part's information opens. */
   close() {
-    if (!this.isOpen()) return;
-    this.root.hidden = true;
-    this.stage.classList.remove('drop-target');
     const id = this.partId;
+    if (this.hide()) this.handlers.closed(id);
+  }
+
+  /** Hides the step without further ado; true when it was open. */
+  hide() {
+    if (!this.isOpen()) return false;
+    this.root.hidden = true;
+    this.setDropTarget(false);
     this.partId = null;
-    this.handlers.closed(id);
+    return true;
   }
 
   say(text, isError = false) {

@@ -36,7 +36,8 @@ export class SelectController {
    *   camera: () => {eye: number[], target: number[], up: number[], fovy: number, width: number, height: number},
    *   pauseNavigation: (on: boolean) => void, highlightChanged: () => void,
    *   partConfirmed: (part: object, created: boolean) => Promise<void>,
-   *   contentsChanged: (partId: number) => void, partTitle: (id: number) => string}} host
+   *   assignDone: (partId: number) => void, contentsChanged: (partId: number) => void,
+   *   partTitle: (id: number) => string}} host
    */
   constructor(root, stage, host) {
     this.host = host;
@@ -76,9 +77,12 @@ export class SelectController {
       onStroke: (s) => this.stroke(s),
       onClick: (p) => this.click(p),
     });
-    this.assign = new AssignStep(stage, this.api, {
+    this.assign = new AssignStep(root, stage, this.api, {
       assigned: (partId) => host.contentsChanged(partId),
-      closed: () => this.render(),
+      closed: (partId) => {
+        this.render();
+        host.assignDone(partId);
+      },
     });
     this.onKey = (e) => {
       if (e.key !== 'Escape') return;
@@ -100,9 +104,11 @@ export class SelectController {
     return this.highlight.active;
   }
 
-  /** The part open in the panel (null: none), for *Edit region*. */
+  /** The part open in the panel (null: none), for *Edit region*; another part's information
+   * taking the panel's place ends the assign step. */
   setOpenPart(id) {
     this.openPart = id;
+    if (id !== null) this.assign.hide();
     this.render();
   }
 

@@ -125,7 +125,12 @@ class Viewer {
       highlightChanged: () => this.markAll(),
       partConfirmed: async (part) => {
         await this.store.reloadPart(part.id);
-        this.select(part.id, true);
+        // Highlighted, its information opens once the assign step is done.
+        this.panel.close();
+        this.select(part.id, false);
+      },
+      assignDone: (id) => {
+        if (this.store.parts.has(id)) this.select(id, true);
       },
       contentsChanged: async (id) => {
         await this.store.reloadContents(id);
