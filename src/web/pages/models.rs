@@ -85,11 +85,18 @@ struct PartView {
 
 /// JSON embedded in the model page for the viewer (no extra round trips at start-up).
 /// Escaped so that it cannot close its `<script type="application/json">` element.
-fn viewer_json(model: &Model, parts: &[PartView], can_edit: bool) -> String {
+fn viewer_json(
+    model: &Model,
+    parts: &[PartView],
+    can_edit: bool,
+    render: &crate::config::RenderSettings,
+) -> String {
     let json = serde_json::json!({
         "model": model,
         "parts": parts,
         "can_edit": can_edit,
+        // The largest view the server renders (selection masks must fit it).
+        "view_limits": {"max_side": render.max_side, "max_pixels": render.max_pixels},
     })
     .to_string();
     json.replace('<', "\\u003c")
@@ -169,7 +176,7 @@ async fn show(
         viewer_enabled: ready && crate::web::vendor::available(),
         viewer_message,
         import_map: crate::web::vendor::IMPORT_MAP,
-        viewer_data: viewer_json(&model, &views, can_edit),
+        viewer_data: viewer_json(&model, &views, can_edit, &state.settings.render),
         layout,
         description_html: markdown::render(&model.description),
         bbox,

@@ -33,6 +33,7 @@ export class SelectController {
    * @param {HTMLElement} root the viewer element (its `data-csrf`)
    * @param {HTMLElement} stage the viewer's stage
    * @param {{modelId: number, radius: number, vertices: number,
+   *   limits: {maxSide: number, maxPixels: number}|null,
    *   camera: () => {eye: number[], target: number[], up: number[], fovy: number, width: number, height: number},
    *   pauseNavigation: (on: boolean) => void, highlightChanged: () => void,
    *   partConfirmed: (part: object, created: boolean) => Promise<void>,
@@ -43,6 +44,7 @@ export class SelectController {
     this.host = host;
     this.api = new Api(csrfToken(root));
     this.session = new SelectionSession(host.modelId, this.api, () => this.render());
+    if (host.limits) this.session.limits = { ...host.limits };
     this.highlight = new DraftHighlight(host.modelId, host.radius, host.vertices);
     this.tool = null;
     this.mode = 'replace';

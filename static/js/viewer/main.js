@@ -96,6 +96,9 @@ class Viewer {
         this.requestFrame();
       },
     });
+    this.viewLimits = data.view_limits
+      ? { maxSide: data.view_limits.max_side, maxPixels: data.view_limits.max_pixels }
+      : null;
     this.selection = data.can_edit ? this.makeSelection() : null;
     if (this.selection) this.toolbar.addGroup(this.selection.element);
     this.store.onChange(() => this.partsChanged());
@@ -116,6 +119,7 @@ class Viewer {
       modelId: this.modelId,
       radius: this.table.radius,
       vertices: this.table.inputVertices,
+      limits: this.viewLimits,
       camera: () => this.cameraState(),
       pauseNavigation: (on) => {
         this.nav.controls.enabled = !on;
