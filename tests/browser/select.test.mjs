@@ -1,6 +1,5 @@
 // The viewer's region-selection tools (issue 6): the mask rasteriser (no antialiasing, exact
-// fills) and the chain of drafts (base / part_id, undo, confirm, cancel, learnt limits) in
-// Node; then in Debian's headless Chromium against the real server with a real scan, as an
+// fills) in Node; then in Debian's headless Chromium against the real server with a real scan, as an
 // admin: a lasso dragged with the mouse gives a draft whose exact highlight and vertex count
 // show at once without moving the camera; undo discards it; a heavy lasso that encloses
 // nothing shows the server's message; a heavy lasso, an added lasso and undo chain drafts;
@@ -16,8 +15,6 @@ import { join } from 'node:path';
 
 import { RoaringBitmap } from '../../static/js/parts/roaring.js';
 import { LABEL, fillPolygon, fitSize, histogram, rasterise, strokePath } from '../../static/js/select/raster.js';
-import { ApiError } from '../../static/js/select/api.js';
-import { SelectionSession } from '../../static/js/select/session.js';
 import { sampleMesh } from './support/env.mjs';
 import { ADMIN, addUser, importScan, startServer } from './support/server.mjs';
 import { launch, login, poll, waitViewer } from './support/browser.mjs';
@@ -92,85 +89,6 @@ test('the stroke mask: exact scanline fills and swept discs, one label per pixel
   assert.ok(Math.abs(big.width / big.height - 2) < 0.01 && Math.abs(big.sx - big.sy) < 0.001);
   const scaled = rasterise([{ kind: 'lasso', points: [{ x: 0, y: 0 }, { x: 6000, y: 0 }, { x: 6000, y: 3000 }, { x: 0, y: 3000 }] }], big);
   assert.equal(histogram(scaled)[4], big.width * big.height);
-});
-
-/** An API double recording the calls a session makes; drafts are d1, d2, … */
-function fakeApi() {
-  const calls = [];
-  let n = 0;
-  return {
-    calls,
-    async post(url, body) {
-      const request = body instanceof FormData ? JSON.parse(body.get('request')) : body;
-      calls.push(['POST', url, request, body instanceof FormData ? body.get('mask').type : null]);
-      n++;
-      return { id: `d${n}`, vertex_count: 10 * n, center: [0, 0, 0], base: request.base ?? null };
-    },
-    async send(method, url) {
-      calls.push([method, url]);
-      return { status: 201, json: async () => ({ id: 7, kind: 'region' }) };
-    },
-    async bytes(url) {
-      calls.push(['GET', url]);
-      return new ArrayBuffer(0);
-    },
-    async delete(url) {
-      calls.push(['DELETE', url]);
-      return null;
-    },
-  };
-}
-
-test('the draft chain: base and part_id, replacing a markup draft, undo, confirm, cancel, limits', async () => {
-  const api = fakeApi();
-  let changes = 0;
-  const session = new SelectionSession(3, api, () => changes++);
-  const mask = new Blob([new Uint8Array([137, 80, 78, 71])], { type: 'image/png' });
-  await session.select({ tool: 'lasso', mode: 'replace' }, mask);
-  await session.select({ tool: 'lasso', mode: 'add' }, mask);
-  await session.select({ tool: 'markup', mode: 'add' }, mask);
-  await session.select({ tool: 'markup', mode: 'add' }, mask, { replaceTop: true });
-  const posts = api.calls.filter((c) => c[0] === 'POST');
-  assert.deepEqual(posts.map((c) => c[1]), Array(4).fill('/api/v1/models/3/selections'));
-  assert.deepEqual(posts.map((c) => c[2].base), [undefined, 'd1', 'd2', 'd2'], 'each builds on the one before; a refined markup on the one below it');
-  assert.equal(posts[0][3], 'image/png');
-  assert.deepEqual(session.stack.map((e) => e.draft.id), ['d1', 'd2', 'd4']);
-  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d3'), 'the replaced draft is discarded');
-  assert.ok(changes >= 8);
-  assert.ok(session.undo());
-  assert.deepEqual(session.stack.map((e) => e.draft.id), ['d1', 'd2']);
-  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d4'));
-  const { part, created } = await session.confirm();
-  assert.deepEqual([part.id, created], [7, true]);
-  assert.ok(api.calls.some((c) => c[0] === 'POST' && c[1] === '/api/v1/selections/d2/confirm'));
-  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d1'), 'older drafts are discarded');
-  assert.equal(session.stack.length, 0);
-  assert.equal(session.undo(), false);
-
-  // Editing a part: the first request names it, the next build on the draft.
-  await session.edit(42);
-  await session.select({ tool: 'lasso', mode: 'subtract' }, mask);
-  await session.select({ tool: 'point', mode: 'replace', point: [1, 2] }, null);
-  const [a, b] = api.calls.filter((c) => c[0] === 'POST' && c[1].endsWith('/selections')).slice(-2);
-  assert.equal(a[2].part_id, 42);
-  assert.equal(a[2].base, undefined);
-  assert.deepEqual([b[2].base, b[2].part_id, b[3]], ['d5', undefined, null], 'the point tool is sent as plain JSON');
-  // Cancel while a request is running: its draft is dropped when it comes back.
-  const pending = session.select({ tool: 'lasso', mode: 'add' }, mask);
-  await session.cancel();
-  await assert.rejects(pending, (e) => e.cancelled === true);
-  assert.equal(session.stack.length, 0);
-  assert.equal(session.partId, null);
-  assert.ok(api.calls.some((c) => c[0] === 'DELETE' && c[1] === '/api/v1/selections/d7'));
-
-  // A server with smaller view limits: learnt from its message.
-  const tooLarge = new ApiError(400, 'a 693x480 view is too large: at most 512 pixels a side and 200000 pixels');
-  assert.ok(session.learnLimits(tooLarge));
-  assert.deepEqual(session.limits, { maxSide: 512, maxPixels: 200000 });
-  assert.ok(!session.learnLimits(tooLarge), 'the same limits again are no news');
-  assert.ok(!session.learnLimits(new ApiError(400, 'the lasso encloses no surface of the model')));
-  const size = fitSize(693, 480, session.limits);
-  assert.ok(size.width <= 512 && size.width * size.height <= 200000, JSON.stringify(size));
 });
 
 describe('the selection tools on the real server', () => {
