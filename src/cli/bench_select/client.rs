@@ -1,12 +1,7 @@
-//! The real system, driven from outside: this binary's own `user add`, `import` and `serve`
-//! subcommands on a scratch data directory, then HTTP to the server (as the viewer and the
-//! tests do: session login with its CSRF token, selections as multipart `request` + `mask`,
-//! render buffers in the `MWRB` layout of `src/web/render.rs`).
+//! The real server over HTTP, as the viewer and the tests drive it: session login with its
+//! CSRF token, selections as multipart `request` + `mask` (`src/web/selections.rs`), drafts'
+//! vertex sets, render buffers in the `MWRB` layout of `src/web/render.rs`.
 
-use std::io::{BufRead, BufReader, Write};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -14,152 +9,6 @@ use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use roaring::RoaringBitmap;
 use serde_json::{Value, json};
-
-/// Log filter of the spawned processes (their output goes to a log file).
-fn log_filter() -> String {
-    std::env::var("MESHWIKI_LOG").unwrap_or_else(|_| "warn".into())
-}
-
-fn log_file(path: &Path) -> Result<std::fs::File> {
-    std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
-        .with_context(|| format!("opening {}", path.display()))
-}
-
-/// The last lines of the log, for error messages.
-pub fn log_tail(path: &Path) -> String {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
-    let lines: Vec<&str> = text.lines().collect();
-    lines[lines.len().saturating_sub(15)..].join("\n")
-}
-
-/// This binary's subcommands on one data directory.
-#[derive(Debug, Clone)]
-pub struct Meshwiki {
-    pub exe: PathBuf,
-    pub data_dir: PathBuf,
-    pub log: PathBuf,
-}
-
-impl Meshwiki {
-    fn command(&self, args: &[&str]) -> Result<Command> {
-        let mut c = Command::new(&self.exe);
-        c.args(args)
-            .arg("--data-dir")
-            .arg(&self.data_dir)
-            .env("MESHWIKI_LOG", log_filter())
-            .stderr(log_file(&self.log)?);
-        Ok(c)
-    }
-
-    /// `user add NAME --role admin`, the password on standard input.
-    pub fn add_admin(&self, name: &str, password: &str) -> Result<()> {
-        let mut child = self
-            .command(&["user", "add", name, "--role", "admin"])?
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .context("running meshwiki user add")?;
-        if let Some(mut stdin) = child.stdin.take() {
-            // A closed pipe means the command failed early: its status says why.
-            let _ = stdin.write_all(format!("{password}\n").as_bytes());
-        }
-        let status = child.wait().context("waiting for meshwiki user add")?;
-        if !status.success() {
-            bail!("meshwiki user add failed:\n{}", log_tail(&self.log));
-        }
-        Ok(())
-    }
-
-    /// `import FILE --title T`: builds the model through the real pipeline; returns its id.
-    pub fn import(&self, file: &Path, title: &str) -> Result<i64> {
-        let file = file.to_string_lossy();
-        let out = self
-            .command(&["import", &*file, "--title", title])?
-            .stdin(Stdio::null())
-            .output()
-            .context("running meshwiki import")?;
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        if !out.status.success() {
-            bail!("meshwiki import {file} failed:\n{}", log_tail(&self.log));
-        }
-        stdout
-            .lines()
-            .find_map(|l| {
-                let rest = l.split(" as model ").nth(1)?;
-                rest.split_whitespace().next()?.parse().ok()
-            })
-            .with_context(|| format!("meshwiki import printed no model id: {stdout}"))
-    }
-
-    /// `serve --bind 127.0.0.1:0`, waiting until it listens.
-    pub fn serve(&self) -> Result<Running> {
-        let mut child = self
-            .command(&["serve", "--bind", "127.0.0.1:0", "--workers", "2"])?
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .spawn()
-            .context("running meshwiki serve")?;
-        let stdout = child.stdout.take().context("server output")?;
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            let mut tx = Some(tx);
-            for line in BufReader::new(stdout).lines() {
-                let Ok(line) = line else { break };
-                if let Some(addr) = line.strip_prefix("meshwiki listening on ")
-                    && let Some(tx) = tx.take()
-                {
-                    let _ = tx.send(addr.trim().to_string());
-                }
-            }
-        });
-        let server = Server { child };
-        match rx.recv_timeout(Duration::from_secs(120)) {
-            Ok(base) => Ok(server.with_base(base)),
-            Err(_) => bail!(
-                "the server did not start within 120 s:\n{}",
-                log_tail(&self.log)
-            ),
-        }
-    }
-}
-
-/// A running server, stopped on drop.
-#[derive(Debug)]
-pub struct Server {
-    child: Child,
-}
-
-/// A running server and its address.
-#[derive(Debug)]
-pub struct Running {
-    /// Kept for its drop, which stops the server.
-    _server: Server,
-    pub base: String,
-}
-
-impl Server {
-    fn with_base(self, base: String) -> Running {
-        let base = if base.starts_with("http://") {
-            base
-        } else {
-            format!("http://{base}")
-        };
-        Running {
-            _server: self,
-            base,
-        }
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 /// A logged-in API client.
 pub struct Api {
@@ -238,7 +87,10 @@ impl Api {
             .map(|v| v.split(';').next().unwrap_or("").to_string());
         let body = resp.into_body().read_to_vec()?;
         if status != 200 {
-            bail!("login failed ({status}): {}", String::from_utf8_lossy(&body));
+            bail!(
+                "login failed ({status}): {}",
+                String::from_utf8_lossy(&body)
+            );
         }
         let v: Value = serde_json::from_slice(&body).context("login answer")?;
         api.csrf = v["csrf_token"]
@@ -404,9 +256,7 @@ pub fn parse_vertex_buffer(body: &[u8], pixels: usize) -> Result<Vec<u32>> {
         bail!("the render buffers answer is not MWRB version 1");
     }
     let len = u32_at(body, 8).context("truncated buffers header")? as usize;
-    let header = body
-        .get(12..12 + len)
-        .context("truncated buffers header")?;
+    let header = body.get(12..12 + len).context("truncated buffers header")?;
     let header: Value = serde_json::from_slice(header).context("buffers header")?;
     let entry = header["buffers"]
         .as_array()

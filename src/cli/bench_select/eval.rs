@@ -17,8 +17,8 @@ use roaring::RoaringBitmap;
 use serde::Serialize;
 
 use super::client::Api;
-use super::psb::{Region, Segmentation};
 use super::strokes::{self, Rng, UserModel};
+use super::truth::{Region, Segmentation};
 
 /// Fewest pixels of a region on screen for it to be evaluated.
 pub const MIN_PIXELS: usize = 200;
@@ -105,7 +105,14 @@ fn region_mask(ids: &[u32], seg: &Segmentation, segment: u32) -> Vec<bool> {
 /// The camera that frames `region` and shows most of it: each direction is probed at a
 /// quarter of the size through the render API, scored by the region's pixels; a direction
 /// replaces the mean normal's only when it shows 15 % more.
-fn frame(api: &Api, model: i64, seg: &Segmentation, region: &Region, w: u32, h: u32) -> Result<Camera> {
+fn frame(
+    api: &Api,
+    model: i64,
+    seg: &Segmentation,
+    region: &Region,
+    w: u32,
+    h: u32,
+) -> Result<Camera> {
     let opts = BestViewOptions {
         fovy_deg: 40.0,
         margin: 1.3,
@@ -125,7 +132,14 @@ fn frame(api: &Api, model: i64, seg: &Segmentation, region: &Region, w: u32, h: 
         }
     }
     let dir = best.map_or(Vec3::Z, |(d, _)| d);
-    Ok(framing_camera(region.center, dir, region.extent, &opts, w, h))
+    Ok(framing_camera(
+        region.center,
+        dir,
+        region.extent,
+        &opts,
+        w,
+        h,
+    ))
 }
 
 /// What a tool's strokes gave: the selected vertices, each POST's latency and server time,
@@ -137,7 +151,12 @@ struct Submitted {
     refused: Option<String>,
 }
 
-fn score(tool: &'static str, truth: &RoaringBitmap, boundary: &RoaringBitmap, got: &Submitted) -> ToolResult {
+fn score(
+    tool: &'static str,
+    truth: &RoaringBitmap,
+    boundary: &RoaringBitmap,
+    got: &Submitted,
+) -> ToolResult {
     let extra = &got.set - truth;
     let missed = truth - &got.set;
     let fp = extra.difference_len(boundary);
@@ -234,7 +253,11 @@ fn write_dump(
     let mut img = image::RgbImage::new(w, h);
     for (x, y, p) in img.enumerate_pixels_mut() {
         let i = (y * w + x) as usize;
-        let mut c = if covered[i] { [90u8, 90, 90] } else { [20, 20, 20] };
+        let mut c = if covered[i] {
+            [90u8, 90, 90]
+        } else {
+            [20, 20, 20]
+        };
         if region[i] {
             c[1] = 150;
         }
@@ -242,14 +265,16 @@ fn write_dump(
             c[2] = 255;
         }
         let lasso_edge = l[i] == mask::LASSO
-            && [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)].iter().any(|(dx, dy)| {
-                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                nx >= 0
-                    && ny >= 0
-                    && nx < w as i64
-                    && ny < h as i64
-                    && l[(ny as u32 * w + nx as u32) as usize] != mask::LASSO
-            });
+            && [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+                .iter()
+                .any(|(dx, dy)| {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    nx >= 0
+                        && ny >= 0
+                        && nx < w as i64
+                        && ny < h as i64
+                        && l[(ny as u32 * w + nx as u32) as usize] != mask::LASSO
+                });
         match l[i] {
             mask::HEAVY => c[0] = 200,
             mask::FOREGROUND => c = [255, 255, 0],
@@ -306,7 +331,9 @@ pub fn region(c: &Case<'_>) -> Result<std::result::Result<RegionResult, Skip>> {
         .map(|&b| if b { mask::LASSO } else { mask::NONE })
         .collect();
     let mut tools = Vec::new();
-    let steps = |first: Vec<u8>, holes: Option<Vec<u8>>| [Some(first), holes].into_iter().flatten().collect();
+    let steps = |first: Vec<u8>, holes: Option<Vec<u8>>| {
+        [Some(first), holes].into_iter().flatten().collect()
+    };
     let all: [Vec<Vec<u8>>; 4] = [
         steps(s.heavy_lasso, s.heavy_lasso_holes),
         vec![s.markup],
@@ -314,7 +341,11 @@ pub fn region(c: &Case<'_>) -> Result<std::result::Result<RegionResult, Skip>> {
         vec![exact],
     ];
     for ((name, _), labels) in TOOLS.iter().zip(all) {
-        let api_tool = if *name == "exact_mask" { "lasso" } else { *name };
+        let api_tool = if *name == "exact_mask" {
+            "lasso"
+        } else {
+            *name
+        };
         let file = c
             .dump
             .map(|d| d.join(format!("{}_{}_{name}.png", c.psb_id, c.region.segment)));

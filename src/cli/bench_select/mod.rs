@@ -2,22 +2,25 @@
 //! paper §4.1–4.2 for the tools, §4.3 for the measure: mis-selected vertices over the
 //! region's vertices). Figures are printed, never asserted.
 //!
-//! On the Princeton segmentation benchmark ([`psb`]) it runs the real system: a scratch data
-//! directory, every chosen OFF model imported by this binary's `import` (the real LOD
-//! pipeline), the real server started on an ephemeral port, an admin logged in over HTTP
-//! ([`client`]). For each region of each model's first human segmentation ([`eval`]): a
-//! camera framing it (centroid, mean normal, extent, the most visible of a few directions),
-//! its visible ground truth (the vertices a lasso over the whole view selects, within the
-//! region) and its on-screen mask (the render API's id buffer); then simulated users
-//! ([`strokes`]) draw a heavy lasso, a markup and a plain lasso with the same jitter, each
-//! submitted to `POST /api/v1/models/{id}/selections`, the draft's vertices fetched and
+//! On the Princeton segmentation benchmark ([`psb`], [`truth`]) it runs the real system: a
+//! scratch data directory, every chosen OFF model imported by this binary's `import` (the real
+//! LOD pipeline), the real server started on an ephemeral port, an admin logged in over HTTP
+//! ([`process`], [`client`]). For each region of each model's first human segmentation
+//! ([`eval`]): a camera framing it (centroid, mean normal, extent; the most visible of a few
+//! directions), its visible ground truth (the vertices a lasso over the whole view selects,
+//! within the region) and its on-screen mask (the render API's id buffer); then simulated
+//! users ([`strokes`]) draw a heavy lasso, a markup and a plain lasso with the same jitter,
+//! each submitted to `POST /api/v1/models/{id}/selections`, the draft's vertices fetched and
 //! compared. The exact on-screen mask, submitted as a lasso, is the reference (the floor of
-//! back-projection). Prints, per tool, mean and p90 error and the POST's p50/p95 latency.
+//! back-projection). Prints, per tool, mean / p50 / p90 error and the POST's p50/p95 latency.
 
 mod client;
 mod eval;
+mod process;
 mod psb;
+mod raster;
 mod strokes;
+mod truth;
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -27,8 +30,9 @@ use clap::Args as ClapArgs;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
 
-use client::{Api, Meshwiki};
+use client::Api;
 use eval::{RegionResult, Skip, TOOLS};
+use process::Meshwiki;
 use strokes::UserModel;
 
 /// Default location of the benchmark, relative to the repository root.
@@ -82,9 +86,11 @@ impl Drop for Scratch {
 fn bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
     bar.set_style(
-        ProgressStyle::with_template("{spinner} {prefix:>8} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} {prefix:>8} [{bar:30}] {pos}/{len} {msg} ({elapsed})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
     bar.set_prefix(what.to_string());
     bar.enable_steady_tick(Duration::from_millis(200));
@@ -128,7 +134,7 @@ fn check(args: &Args) -> Result<()> {
 struct Model {
     psb_id: u32,
     model_id: i64,
-    seg: psb::Segmentation,
+    seg: truth::Segmentation,
     faces: usize,
 }
 
@@ -176,9 +182,9 @@ pub fn run(args: Args) -> Result<()> {
     for (&id, (off, seg)) in ids.iter().zip(&files) {
         let category = psb::category(id);
         imports.set_message(format!("{id} ({category})"));
-        let mesh = psb::read_off(off)?;
-        let labels = psb::read_seg(seg, mesh.faces)?;
-        let segmentation = psb::segment(&mesh, &labels, MIN_REGION_SHARE);
+        let mesh = truth::read_off(off)?;
+        let labels = truth::read_seg(seg, mesh.faces)?;
+        let segmentation = truth::segment(&mesh, &labels, MIN_REGION_SHARE);
         let t = Instant::now();
         let model_id = mw.import(off, &format!("PSB {id} ({category})"))?;
         tracing::info!(
@@ -237,7 +243,7 @@ pub fn run(args: Args) -> Result<()> {
                     "model {} segment {} (server log: {})",
                     m.psb_id,
                     region.segment,
-                    client::log_tail(&mw.log)
+                    process::log_tail(&mw.log)
                 )
             })?;
             match outcome {
@@ -292,7 +298,14 @@ fn report(
 ) -> serde_json::Value {
     let names: Vec<String> = models
         .iter()
-        .map(|m| format!("{} {} ({} faces)", psb::category(m.psb_id), m.psb_id, m.faces))
+        .map(|m| {
+            format!(
+                "{} {} ({} faces)",
+                psb::category(m.psb_id),
+                m.psb_id,
+                m.faces
+            )
+        })
         .collect();
     let tiny: usize = models.iter().map(|m| m.seg.tiny).sum();
     println!(
@@ -317,7 +330,14 @@ fn report(
     );
     println!(
         "  {:<18} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8} {:>12} {:>12}",
-        "tool", "regions", "mean err", "p50 err", "p90 err", "strict", "refused", "latency p50",
+        "tool",
+        "regions",
+        "mean err",
+        "p50 err",
+        "p90 err",
+        "strict",
+        "refused",
+        "latency p50",
         "latency p95"
     );
     let mut summary = serde_json::Map::new();
@@ -328,8 +348,15 @@ fn report(
             .iter()
             .flat_map(|r| r.tools[k].latency_ms.iter().copied())
             .collect();
-        let refused = results.iter().filter(|r| r.tools[k].refused.is_some()).count();
-        let (m, p50, p90) = (mean(&errors), percentile(&errors, 0.5), percentile(&errors, 0.9));
+        let refused = results
+            .iter()
+            .filter(|r| r.tools[k].refused.is_some())
+            .count();
+        let (m, p50, p90) = (
+            mean(&errors),
+            percentile(&errors, 0.5),
+            percentile(&errors, 0.9),
+        );
         let (l50, l95) = (percentile(&latency, 0.5), percentile(&latency, 0.95));
         println!(
             "  {:<18} {:>7} {:>8.2}% {:>8.2}% {:>8.2}% {:>8.2}% {:>8} {:>9.0} ms {:>9.0} ms",

@@ -1,18 +1,14 @@
-//! Ground truth from the Princeton Mesh Segmentation Benchmark (Chen, Golovinskiy and
-//! Funkhouser, SIGGRAPH 2009), laid out as `../shared/data/README.md` describes: ASCII
-//! `data/off/<id>.off` meshes and `data/seg/Benchmark/<id>/<id>_<k>.seg` human segmentations
-//! (line `i` = segment of face `i`), in a `.tar.zst` archive or unpacked (the small `sample/`).
-//!
-//! A region is the set of vertices of the faces of one segment; vertex ids are the OFF file's
-//! vertex indices, which are the original ids the LOD hierarchy keeps (engine `mesh::off`).
+//! The Princeton Mesh Segmentation Benchmark (Chen, Golovinskiy and Funkhouser, SIGGRAPH
+//! 2009), laid out as `../shared/data/README.md` describes: ASCII `data/off/<id>.off` meshes and
+//! `data/seg/Benchmark/<id>/<id>_<k>.seg` human segmentations (line `i` = segment of face
+//! `i`), in a `.tar.zst` archive or unpacked (the small `sample/`): finding the data, choosing
+//! models over its categories, unpacking only those. [`super::truth`] reads the files.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use anyhow::{Context, Result, bail};
-use glam::Vec3;
-use roaring::RoaringBitmap;
 
 /// The 19 categories (first id of each, 20 models apiece), most heritage-like first.
 pub const CATEGORIES: [(&str, u32); 19] = [
@@ -49,7 +45,10 @@ pub fn category(id: u32) -> &'static str {
 #[derive(Debug)]
 enum Layout {
     /// The package archive, with its member names.
-    Archive { archive: PathBuf, members: Vec<String> },
+    Archive {
+        archive: PathBuf,
+        members: Vec<String>,
+    },
     /// Unpacked: `off/<id>.off` and `seg/Benchmark/<id>/` under these folders.
     Dir { off: PathBuf, seg: PathBuf },
 }
@@ -155,7 +154,10 @@ impl Psb {
             std::fs::read_dir(&off).with_context(|| format!("reading {}", off.display()))?;
         for e in entries.flatten() {
             let name = e.file_name().to_string_lossy().into_owned();
-            let Some(id) = name.strip_suffix(".off").and_then(|s| s.parse::<u32>().ok()) else {
+            let Some(id) = name
+                .strip_suffix(".off")
+                .and_then(|s| s.parse::<u32>().ok())
+            else {
                 continue;
             };
             let segs = std::fs::read_dir(seg.join(id.to_string()))
@@ -258,220 +260,15 @@ impl Psb {
     }
 }
 
-/// A triangle mesh of the benchmark, as its OFF file has it.
-#[derive(Debug, Clone)]
-pub struct Mesh {
-    pub positions: Vec<Vec3>,
-    /// Faces (fan-triangulated polygons keep their face's index in `face_of`).
-    pub triangles: Vec<[u32; 3]>,
-    pub face_of: Vec<u32>,
-    pub faces: usize,
-}
-
-/// Reads an ASCII OFF file (the benchmark's: `OFF`, counts, vertices, faces).
-pub fn read_off(path: &Path) -> Result<Mesh> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut tokens = text
-        .lines()
-        .enumerate()
-        .map(|(n, l)| (n + 1, l.split('#').next().unwrap_or("")))
-        .flat_map(|(n, l)| l.split_whitespace().map(move |t| (n, t)));
-    let bad = |line: usize, what: &str| anyhow::anyhow!("{}:{line}: {what}", path.display());
-    let (line, key) = tokens.next().ok_or_else(|| bad(1, "empty file"))?;
-    if key != "OFF" {
-        return Err(bad(line, "not an ASCII OFF file"));
-    }
-    let mut number = |what: &str| -> Result<(usize, f64)> {
-        let (line, t) = tokens
-            .next()
-            .ok_or_else(|| bad(0, &format!("file ends before the {what}")))?;
-        let v: f64 = t
-            .parse()
-            .map_err(|_| bad(line, &format!("{what} {t:?} is not a number")))?;
-        Ok((line, v))
-    };
-    let count = |(line, v): (usize, f64), what: &str| -> Result<usize> {
-        if v < 0.0 || v.fract() != 0.0 || v > 1e9 {
-            return Err(bad(line, &format!("bad {what} {v}")));
-        }
-        Ok(v as usize)
-    };
-    let nv = count(number("vertex count")?, "vertex count")?;
-    let nf = count(number("face count")?, "face count")?;
-    number("edge count")?;
-    let mut positions = Vec::with_capacity(nv);
-    for _ in 0..nv {
-        let x = number("vertex")?.1 as f32;
-        let y = number("vertex")?.1 as f32;
-        let z = number("vertex")?.1 as f32;
-        positions.push(Vec3::new(x, y, z));
-    }
-    let mut triangles = Vec::with_capacity(nf);
-    let mut face_of = Vec::with_capacity(nf);
-    for f in 0..nf {
-        let n = count(number("face size")?, "face size")?;
-        let mut idx = Vec::with_capacity(n);
-        for _ in 0..n {
-            let (line, v) = number("face index")?;
-            let i = count((line, v), "vertex index")?;
-            if i >= nv {
-                return Err(bad(line, &format!("vertex index {i} of {nv}")));
-            }
-            idx.push(i as u32);
-        }
-        for k in 2..n {
-            triangles.push([idx[0], idx[k - 1], idx[k]]);
-            face_of.push(f as u32);
-        }
-    }
-    Ok(Mesh {
-        positions,
-        triangles,
-        face_of,
-        faces: nf,
-    })
-}
-
-/// Reads a `.seg` file: one segment number per face.
-pub fn read_seg(path: &Path, faces: usize) -> Result<Vec<u32>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let labels = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(n, l)| {
-            l.trim()
-                .parse::<u32>()
-                .with_context(|| format!("{}:{}: {l:?} is not a segment", path.display(), n + 1))
-        })
-        .collect::<Result<Vec<u32>>>()?;
-    if labels.len() != faces {
-        bail!(
-            "{} has {} labels for {faces} faces",
-            path.display(),
-            labels.len()
-        );
-    }
-    Ok(labels)
-}
-
-/// A ground-truth region: one segment's vertices and the geometry that frames it.
-#[derive(Debug, Clone)]
-pub struct Region {
-    pub segment: u32,
-    pub vertices: RoaringBitmap,
-    /// Its vertices on the segment boundary (they also belong to a neighbouring segment).
-    pub shared: RoaringBitmap,
-    pub center: Vec3,
-    /// Area-weighted mean normal (zero when it cancels out).
-    pub normal: Vec3,
-    pub extent: f32,
-}
-
-/// The segmentation of a mesh: its regions and, per vertex, the segment most of its faces
-/// belong to (the label of the pixels that show it).
-#[derive(Debug, Clone)]
-pub struct Segmentation {
-    pub regions: Vec<Region>,
-    pub vertex_segment: Vec<u32>,
-    /// Segments left out for being under the size threshold.
-    pub tiny: usize,
-}
-
-/// Regions of `labels` over `mesh` holding at least `min_share` of its vertices.
-pub fn segment(mesh: &Mesh, labels: &[u32], min_share: f64) -> Segmentation {
-    let mut per_segment: BTreeMap<u32, (RoaringBitmap, Vec3)> = BTreeMap::new();
-    let mut counts: Vec<BTreeMap<u32, u32>> = vec![BTreeMap::new(); mesh.positions.len()];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let seg = labels[mesh.face_of[t] as usize];
-        let [a, b, c] = tri.map(|i| mesh.positions[i as usize]);
-        let e = per_segment.entry(seg).or_default();
-        e.0.extend(tri.iter().copied());
-        e.1 += (b - a).cross(c - a);
-        for &v in tri {
-            *counts[v as usize].entry(seg).or_default() += 1;
-        }
-    }
-    let vertex_segment: Vec<u32> = counts
-        .iter()
-        .map(|c| {
-            c.iter()
-                .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
-                .map_or(u32::MAX, |(s, _)| *s)
-        })
-        .collect();
-    let used = counts.iter().filter(|c| !c.is_empty()).count() as u64;
-    let shared: RoaringBitmap = (0..counts.len() as u32)
-        .filter(|&v| counts[v as usize].len() > 1)
-        .collect();
-    let mut tiny = 0;
-    let mut regions = Vec::new();
-    for (segment, (vertices, normal)) in per_segment {
-        if (vertices.len() as f64) < min_share * used as f64 {
-            tiny += 1;
-            continue;
-        }
-        let n = vertices.len() as f64;
-        let sum = vertices.iter().fold([0f64; 3], |s, v| {
-            let p = mesh.positions[v as usize];
-            [s[0] + p.x as f64, s[1] + p.y as f64, s[2] + p.z as f64]
-        });
-        let center = Vec3::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32);
-        let extent = vertices
-            .iter()
-            .map(|v| mesh.positions[v as usize].distance(center))
-            .fold(0.0, f32::max);
-        regions.push(Region {
-            segment,
-            shared: &vertices & &shared,
-            vertices,
-            center,
-            normal: normal.normalize_or_zero(),
-            extent,
-        });
-    }
-    Segmentation {
-        regions,
-        vertex_segment,
-        tiny,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn off_and_seg_give_regions() {
-        let dir = std::env::temp_dir().join(format!("meshwiki-psb-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let off = dir.join("1.off");
-        // Two triangles of a square (segment 0) and a quad split into two (segment 1).
-        std::fs::write(
-            &off,
-            "OFF\n6 3 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n2 0 0\n2 1 0\n3 0 1 2\n3 0 2 3\n4 1 4 5 2\n",
-        )
-        .unwrap();
-        let seg = dir.join("1_0.seg");
-        std::fs::write(&seg, "0\n0\n1\n").unwrap();
-        let mesh = read_off(&off).unwrap();
-        assert_eq!((mesh.triangles.len(), mesh.faces), (4, 3));
-        let labels = read_seg(&seg, mesh.faces).unwrap();
-        let s = segment(&mesh, &labels, 0.0);
-        assert_eq!(s.regions.len(), 2);
-        assert_eq!(s.regions[0].vertices.iter().collect::<Vec<_>>(), [0, 1, 2, 3]);
-        assert_eq!(s.regions[1].vertices.iter().collect::<Vec<_>>(), [1, 2, 4, 5]);
-        assert!((s.regions[0].normal - Vec3::Z).length() < 1e-6);
-        assert_eq!(s.regions[0].shared.iter().collect::<Vec<_>>(), [1, 2]);
-        assert_eq!(s.vertex_segment[4], 1);
-        assert_eq!(s.vertex_segment[0], 0);
-        assert!(read_seg(&seg, 4).is_err());
-        std::fs::write(&off, "PLY\n").unwrap();
-        assert!(read_off(&off).is_err());
-        let _ = std::fs::remove_dir_all(&dir);
+    fn names_and_categories() {
         assert_eq!(category(305), "Bust");
+        assert_eq!(category(270), "?");
         assert_eq!(seg_name("12_3.seg"), Some((12, 3)));
+        assert_eq!(seg_name("12.seg"), None);
     }
 }

@@ -18,6 +18,8 @@
 
 use meshwiki_engine::select::mask;
 
+use super::raster::{distance_sq, fill_holes, large_components, signed_distance};
+
 /// SplitMix64: a small, seedable, deterministic generator.
 #[derive(Debug, Clone)]
 pub struct Rng(u64);
@@ -98,186 +100,16 @@ impl Jitter {
     }
 }
 
-/// One-dimensional squared distance transform (Felzenszwalb & Huttenlocher 2012): the lower
-/// envelope of the parabolas rooted at the finite samples of `f`.
-fn edt_1d(f: &[f64], out: &mut [f64], v: &mut [usize], z: &mut [f64]) {
-    let mut k: Option<usize> = None;
-    for (q, &fq) in f.iter().enumerate() {
-        if !fq.is_finite() {
-            continue;
-        }
-        loop {
-            let Some(top) = k else {
-                k = Some(0);
-                v[0] = q;
-                z[0] = f64::NEG_INFINITY;
-                z[1] = f64::INFINITY;
-                break;
-            };
-            let p = v[top];
-            let s = ((fq + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64);
-            if s <= z[top] {
-                k = top.checked_sub(1);
-                continue;
-            }
-            v[top + 1] = q;
-            z[top + 1] = s;
-            z[top + 2] = f64::INFINITY;
-            k = Some(top + 1);
-            break;
-        }
-    }
-    if k.is_none() {
-        out.fill(f64::INFINITY);
-        return;
-    }
-    let mut j = 0;
-    for (q, o) in out.iter_mut().enumerate() {
-        while z[j + 1] < q as f64 {
-            j += 1;
-        }
-        let d = q as f64 - v[j] as f64;
-        *o = d * d + f[v[j]];
-    }
-}
-
-/// Squared Euclidean distance from every pixel to the nearest pixel where `feature` holds
-/// (infinite when there is none).
-pub fn distance_sq(feature: &[bool], w: usize, h: usize) -> Vec<f32> {
-    let mut d: Vec<f64> = feature
-        .iter()
-        .map(|&f| if f { 0.0 } else { f64::INFINITY })
-        .collect();
-    let n = w.max(h);
-    let (mut f, mut out) = (vec![0f64; n], vec![0f64; n]);
-    let (mut v, mut z) = (vec![0usize; n + 1], vec![0f64; n + 2]);
-    for x in 0..w {
-        for y in 0..h {
-            f[y] = d[y * w + x];
-        }
-        edt_1d(&f[..h], &mut out[..h], &mut v, &mut z);
-        for y in 0..h {
-            d[y * w + x] = out[y];
-        }
-    }
-    for y in 0..h {
-        f[..w].copy_from_slice(&d[y * w..(y + 1) * w]);
-        edt_1d(&f[..w], &mut out[..w], &mut v, &mut z);
-        d[y * w..(y + 1) * w].copy_from_slice(&out[..w]);
-    }
-    d.into_iter().map(|x| x as f32).collect()
-}
-
-/// Signed distance to the outline of `inside`: positive inside, negative outside, the
-/// outline (between pixel centres) at 0.
-pub fn signed_distance(inside: &[bool], w: usize, h: usize) -> Vec<f32> {
-    let outside: Vec<bool> = inside.iter().map(|&b| !b).collect();
-    let to_out = distance_sq(&outside, w, h);
-    let to_in = distance_sq(inside, w, h);
-    inside
-        .iter()
-        .enumerate()
-        .map(|(i, &b)| {
-            if b {
-                to_out[i].sqrt() - 0.5
-            } else {
-                -(to_in[i].sqrt() - 0.5)
-            }
-        })
-        .collect()
-}
-
-/// 8-connected components of `mask`: a label per pixel (`u32::MAX` outside) and the sizes.
-fn components(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, Vec<usize>) {
-    let mut label = vec![u32::MAX; mask.len()];
-    let mut sizes = Vec::new();
-    let mut stack = Vec::new();
-    for s in 0..mask.len() {
-        if !mask[s] || label[s] != u32::MAX {
-            continue;
-        }
-        let c = sizes.len() as u32;
-        let mut size = 0usize;
-        label[s] = c;
-        stack.push(s);
-        while let Some(i) = stack.pop() {
-            size += 1;
-            let (x, y) = ((i % w) as isize, (i / w) as isize);
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let (nx, ny) = (x + dx, y + dy);
-                    if nx < 0 || ny < 0 || nx >= w as isize || ny >= h as isize {
-                        continue;
-                    }
-                    let j = ny as usize * w + nx as usize;
-                    if mask[j] && label[j] == u32::MAX {
-                        label[j] = c;
-                        stack.push(j);
-                    }
-                }
-            }
-        }
-        sizes.push(size);
-    }
-    (label, sizes)
-}
-
-/// Pixels not in `region` that the image border cannot reach (4-connected): its holes.
-fn fill_holes(region: &[bool], w: usize, h: usize) -> Vec<bool> {
-    let mut reach = vec![false; region.len()];
-    let mut stack: Vec<usize> = Vec::new();
-    let push = |i: usize, reach: &mut Vec<bool>, stack: &mut Vec<usize>| {
-        if !region[i] && !reach[i] {
-            reach[i] = true;
-            stack.push(i);
-        }
-    };
-    for x in 0..w {
-        push(x, &mut reach, &mut stack);
-        push((h - 1) * w + x, &mut reach, &mut stack);
-    }
-    for y in 0..h {
-        push(y * w, &mut reach, &mut stack);
-        push(y * w + w - 1, &mut reach, &mut stack);
-    }
-    while let Some(i) = stack.pop() {
-        let (x, y) = (i % w, i / w);
-        if x > 0 {
-            push(i - 1, &mut reach, &mut stack);
-        }
-        if x + 1 < w {
-            push(i + 1, &mut reach, &mut stack);
-        }
-        if y > 0 {
-            push(i - w, &mut reach, &mut stack);
-        }
-        if y + 1 < h {
-            push(i + w, &mut reach, &mut stack);
-        }
-    }
-    reach.iter().map(|&r| !r).collect()
-}
-
-/// The components of `mask` holding at least `keep` pixels of `count`.
-fn large_components(mask: &[bool], count: &[bool], keep: usize, w: usize, h: usize) -> Vec<bool> {
-    let (label, sizes) = components(mask, w, h);
-    let mut weight = vec![0usize; sizes.len()];
-    for (i, &l) in label.iter().enumerate() {
-        if l != u32::MAX && count[i] {
-            weight[l as usize] += 1;
-        }
-    }
-    label
-        .iter()
-        .map(|&l| l != u32::MAX && weight[l as usize] >= keep)
-        .collect()
-}
-
 /// What a user traces: the region's on-screen mask with its holes filled (one stroke follows
 /// an outer outline) and without specks (components under 2 % of it, or under 50 pixels,
 /// that no one would circle); and the holes worth a second, subtracting stroke (those with as
 /// many pixels of surface).
-pub fn traced_outline(region: &[bool], covered: &[bool], w: usize, h: usize) -> (Vec<bool>, Vec<bool>) {
+pub fn traced_outline(
+    region: &[bool],
+    covered: &[bool],
+    w: usize,
+    h: usize,
+) -> (Vec<bool>, Vec<bool>) {
     let filled = fill_holes(region, w, h);
     let total = region.iter().filter(|&&b| b).count();
     let keep = (total / 50).max(50);
@@ -313,7 +145,13 @@ pub struct UserModel {
 }
 
 /// The heavy band and the lasso along the jittered outline of `inside`, and the band's width.
-fn along_outline(inside: &[bool], jitter: &Jitter, user: UserModel, w: usize, h: usize) -> (Vec<u8>, Vec<u8>, f32) {
+fn along_outline(
+    inside: &[bool],
+    jitter: &Jitter,
+    user: UserModel,
+    w: usize,
+    h: usize,
+) -> (Vec<u8>, Vec<u8>, f32) {
     let sd = signed_distance(inside, w, h);
     let offset: Vec<f32> = (0..w * h)
         .map(|i| sd[i] + jitter.at((i % w) as f32 + 0.5, (i / w) as f32 + 0.5))
@@ -323,7 +161,13 @@ fn along_outline(inside: &[bool], jitter: &Jitter, user: UserModel, w: usize, h:
     let band = user.band.min((half_thickness - user.jitter).max(4.0));
     let heavy = offset
         .iter()
-        .map(|&o| if o.abs() < band * 0.5 { mask::HEAVY } else { mask::NONE })
+        .map(|&o| {
+            if o.abs() < band * 0.5 {
+                mask::HEAVY
+            } else {
+                mask::NONE
+            }
+        })
         .collect();
     let lasso = offset
         .iter()
@@ -371,12 +215,19 @@ pub fn draw(
     let mut fg_area: Vec<bool> = region_sd.iter().map(|&d| d > away).collect();
     if !fg_area.iter().any(|&b| b) {
         let deepest = region_sd.iter().copied().fold(0.0f32, f32::max);
-        fg_area = region_sd.iter().map(|&d| d >= deepest * 0.6 && d > 0.0).collect();
+        fg_area = region_sd
+            .iter()
+            .map(|&d| d >= deepest * 0.6 && d > 0.0)
+            .collect();
     }
     let near = |d: f32| d < -away && d > -(away + 80.0);
-    let mut bg_area: Vec<bool> = (0..w * h).map(|i| covered[i] && near(region_sd[i])).collect();
+    let mut bg_area: Vec<bool> = (0..w * h)
+        .map(|i| covered[i] && near(region_sd[i]))
+        .collect();
     if !bg_area.iter().any(|&b| b) {
-        bg_area = (0..w * h).map(|i| covered[i] && region_sd[i] < -away).collect();
+        bg_area = (0..w * h)
+            .map(|i| covered[i] && region_sd[i] < -away)
+            .collect();
     }
     let (mut cx, mut cy, mut n) = (0.0f64, 0.0f64, 0usize);
     for (i, _) in region.iter().enumerate().filter(|(_, b)| **b) {
@@ -386,7 +237,8 @@ pub fn draw(
     }
     let centre = ((cx / n.max(1) as f64) as f32, (cy / n.max(1) as f64) as f32);
     let mut markup = vec![mask::NONE; w * h];
-    let len = |a: &[bool]| ((a.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
+    let len =
+        |a: &[bool]| ((a.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
     let (fg_len, bg_len) = (len(&fg_area), len(&bg_area));
     let mut paint = |area: &[bool], label, count, length, rng: &mut Rng| {
         strokes(&mut markup, area, label, count, length, centre, (w, h), rng)
@@ -457,7 +309,11 @@ fn strokes(
     const STEP: f32 = 1.5;
     for k in 0..count {
         let in_sector: Vec<usize> = pixels.iter().copied().filter(|&i| sector(i) == k).collect();
-        let from = if in_sector.is_empty() { &pixels } else { &in_sector };
+        let from = if in_sector.is_empty() {
+            &pixels
+        } else {
+            &in_sector
+        };
         let start = from[rng.index(from.len())];
         let (mut x, mut y) = ((start % w) as f32 + 0.5, (start / w) as f32 + 0.5);
         let mut heading = rng.range(0.0, std::f32::consts::TAU);
@@ -499,20 +355,6 @@ mod tests {
     }
 
     #[test]
-    fn distance_transform_is_euclidean() {
-        let (w, h) = (9, 7);
-        let mut f = vec![false; w * h];
-        f[3 * w + 4] = true;
-        let d = distance_sq(&f, w, h);
-        for y in 0..h {
-            for x in 0..w {
-                let e = (x as f32 - 4.0).powi(2) + (y as f32 - 3.0).powi(2);
-                assert_eq!(d[y * w + x], e, "({x}, {y})");
-            }
-        }
-    }
-
-    #[test]
     fn strokes_follow_the_outline() {
         let (w, h) = (200, 160);
         let region = disc(w, h, 100.0, 80.0, 50.0);
@@ -534,10 +376,10 @@ mod tests {
         let band = s.heavy_lasso.iter().filter(|&&l| l == mask::HEAVY).count() as f32;
         assert!((band - perimeter * 12.0).abs() < perimeter * 3.0, "{band}");
         let sd = signed_distance(&region, w, h);
-        for i in 0..w * h {
-            match s.markup[i] {
-                mask::FOREGROUND => assert!(sd[i] > 6.0),
-                mask::BACKGROUND => assert!(sd[i] < -6.0),
+        for (&label, &d) in s.markup.iter().zip(&sd) {
+            match label {
+                mask::FOREGROUND => assert!(d > 6.0),
+                mask::BACKGROUND => assert!(d < -6.0),
                 _ => {}
             }
         }
