@@ -55,7 +55,8 @@ fn grid(mesh: &mut Mesh, x0: f32, x1: f32, y0: f32, y1: f32, z: f32) {
         for i in 0..nx {
             // A tiny deterministic offset keeps projections off exact pixel boundaries.
             let jitter = ((i * 7 + j * 13) % 5) as f32 * 1e-4;
-            mesh.positions.push([x0 + i as f32 * STEP + jitter, y0 + j as f32 * STEP, z]);
+            mesh.positions
+                .push([x0 + i as f32 * STEP + jitter, y0 + j as f32 * STEP, z]);
         }
     }
     for j in 0..ny - 1 {
@@ -92,7 +93,10 @@ fn planes() -> &'static Planes {
         lod::build_mesh(&mesh, &out, &options, &NoProgress).expect("build");
         let model = Model::open(&out).expect("open");
         let _ = std::fs::remove_dir_all(&dir);
-        assert!(model.lod().header().level_count > 1, "want a DAG with several levels");
+        assert!(
+            model.lod().header().level_count > 1,
+            "want a DAG with several levels"
+        );
         Planes {
             model,
             mesh,
@@ -185,7 +189,9 @@ fn back_projection_selects_exactly_the_visible_vertices_inside_the_mask() {
         for (id, pos) in leaf_positions(&p.model).iter().enumerate() {
             // The stored full-resolution position (quantised on the model's grid).
             let v = Vec3::from(*pos);
-            let Some((x, y, _)) = c.project(v) else { continue };
+            let Some((x, y, _)) = c.project(v) else {
+                continue;
+            };
             let in_view = x >= 0.0 && y >= 0.0 && x < 320.0 && y < 240.0;
             let in_mask = in_view && selected[y as usize * 320 + x as usize];
             let (occluded, edge_px) = if (id as u32) < p.back_vertices {
@@ -196,7 +202,8 @@ fn back_projection_selects_exactly_the_visible_vertices_inside_the_mask() {
             let got = bp.vertices.contains(id as u32);
             // Ambiguous: near the occluder's outline, or on the back plane's own outline (a
             // silhouette: the pixel centre may miss the plane).
-            let on_outline = (id as u32) < p.back_vertices && (v.x.abs() > 0.99 || v.y.abs() > 0.99);
+            let on_outline =
+                (id as u32) < p.back_vertices && (v.x.abs() > 0.99 || v.y.abs() > 0.99);
             if edge_px < 2.5 || on_outline {
                 skipped += in_mask as usize;
                 continue;
@@ -259,8 +266,14 @@ fn heavy_lasso_around_the_front_plane_selects_it_and_nothing_behind() {
             }
         }
     }
-    let sel = select_pixels(Tool::HeavyLasso, &m, &buffers, &EnergyParams::default(), false)
-        .unwrap();
+    let sel = select_pixels(
+        Tool::HeavyLasso,
+        &m,
+        &buffers,
+        &EnergyParams::default(),
+        false,
+    )
+    .unwrap();
     let bp = back_project(
         p.model.lod(),
         &c,
@@ -270,12 +283,22 @@ fn heavy_lasso_around_the_front_plane_selects_it_and_nothing_behind() {
         &BackProjectOptions::default(),
     )
     .unwrap();
-    let back: Vec<u32> = bp.vertices.iter().filter(|&v| v < p.back_vertices).collect();
-    assert!(back.is_empty(), "back-plane vertices selected: {}", back.len());
+    let back: Vec<u32> = bp
+        .vertices
+        .iter()
+        .filter(|&v| v < p.back_vertices)
+        .collect();
+    assert!(
+        back.is_empty(),
+        "back-plane vertices selected: {}",
+        back.len()
+    );
     // Every front vertex at least 1.5 pixels inside the plane's outline is selected.
     let mut checked = 0;
     for id in p.back_vertices..p.mesh.positions.len() as u32 {
-        let (x, y, _) = c.project(Vec3::from(p.mesh.positions[id as usize])).unwrap();
+        let (x, y, _) = c
+            .project(Vec3::from(p.mesh.positions[id as usize]))
+            .unwrap();
         if x > x0 + 1.5 && x < x1 - 1.5 && y > y0 + 1.5 && y < y1 - 1.5 {
             assert!(bp.vertices.contains(id), "front vertex {id} missing");
             checked += 1;
@@ -295,7 +318,9 @@ fn markup_and_modes_across_two_views() {
     let frame = render(r, &p.model, &c);
     let buffers = Buffers::from_frame(&frame).unwrap();
     // Markup: a foreground stroke across the front plane, background strokes around it.
-    let centre = c.project(Vec3::new((FX0 + FX1) / 2.0, (FY0 + FY1) / 2.0, FRONT_Z)).unwrap();
+    let centre = c
+        .project(Vec3::new((FX0 + FX1) / 2.0, (FY0 + FY1) / 2.0, FRONT_Z))
+        .unwrap();
     let mut m = StrokeMask::empty(320, 240).unwrap();
     for dx in -20i32..20 {
         let (x, y) = (centre.0 as i32 + dx, centre.1 as i32);
@@ -311,12 +336,23 @@ fn markup_and_modes_across_two_views() {
         m.labels[(y * 320 + 235) as usize] = mask::BACKGROUND;
     }
     let sel = select_pixels(Tool::Markup, &m, &buffers, &EnergyParams::default(), false).unwrap();
-    let bp = back_project(p.model.lod(), &c, &buffers, &sel.selected, None, &Default::default())
-        .unwrap();
+    let bp = back_project(
+        p.model.lod(),
+        &c,
+        &buffers,
+        &sel.selected,
+        None,
+        &Default::default(),
+    )
+    .unwrap();
     let front: RoaringBitmap = (p.back_vertices..p.mesh.positions.len() as u32).collect();
     let found = bp.vertices.intersection_len(&front);
     // The whole front plane, its outline (silhouette vertices) included.
-    assert!(found as f64 > front.len() as f64 * 0.97, "{found} of {}", front.len());
+    assert!(
+        found as f64 > front.len() as f64 * 0.97,
+        "{found} of {}",
+        front.len()
+    );
     assert!(
         bp.vertices.len() - found < 20,
         "{} back vertices",

@@ -198,7 +198,9 @@ async fn check_set(tx: &mut Tx, model_id: i64, set: &RoaringBitmap, limit: usize
 
 fn validate(w: &SelectionWrite<'_>) -> Result<()> {
     if !w.center.iter().all(|v| v.is_finite()) {
-        return Err(StoreError::Invalid("the selection has no finite centre".into()));
+        return Err(StoreError::Invalid(
+            "the selection has no finite centre".into(),
+        ));
     }
     if w.kind == PartKind::Region && w.set.is_empty() {
         return Err(StoreError::Invalid(
@@ -247,7 +249,15 @@ pub async fn create_part(
         vertex_count: w.set.len() as i64,
         vertex_set: blob.as_deref(),
     };
-    record_tx(&mut tx, &snapshot, "create", Some(w.tool), w.view.as_ref(), Some(user_id)).await?;
+    record_tx(
+        &mut tx,
+        &snapshot,
+        "create",
+        Some(w.tool),
+        w.view.as_ref(),
+        Some(user_id),
+    )
+    .await?;
     super::audit::record(
         &mut tx,
         Some(user_id),
@@ -320,7 +330,15 @@ pub async fn update_part(
         vertex_count: w.set.len() as i64,
         vertex_set: blob.as_deref(),
     };
-    record_tx(&mut tx, &snapshot, w.action, Some(w.tool), w.view.as_ref(), Some(user_id)).await?;
+    record_tx(
+        &mut tx,
+        &snapshot,
+        w.action,
+        Some(w.tool),
+        w.view.as_ref(),
+        Some(user_id),
+    )
+    .await?;
     super::audit::record(
         &mut tx,
         Some(user_id),

@@ -87,26 +87,24 @@ const BACKPROJECT_BYTES: u64 = 64 << 20;
 
 /// Mounts the routes.
 pub fn configure(cfg: &mut web::ServiceConfig) {
-    cfg.service(
-        super::resource("/api/v1/models/{id}/selections").route(web::post().to(create)),
-    )
-    .service(
-        super::resource("/api/v1/selections/{draft}")
-            .route(web::get().to(get))
-            .route(web::delete().to(discard)),
-    )
-    .service(super::resource("/api/v1/selections/{draft}/mask").route(web::get().to(mask_png)))
-    .service(
-        super::resource("/api/v1/selections/{draft}/vertices").route(web::get().to(vertices)),
-    )
-    .service(
-        super::resource("/api/v1/selections/{draft}/confirm").route(web::post().to(confirm)),
-    )
-    .service(super::resource("/api/v1/parts/{id}/revisions").route(web::get().to(revisions)))
-    .service(
-        super::resource("/api/v1/parts/{id}/revisions/{number}/vertices")
-            .route(web::get().to(revision_vertices)),
-    );
+    cfg.service(super::resource("/api/v1/models/{id}/selections").route(web::post().to(create)))
+        .service(
+            super::resource("/api/v1/selections/{draft}")
+                .route(web::get().to(get))
+                .route(web::delete().to(discard)),
+        )
+        .service(super::resource("/api/v1/selections/{draft}/mask").route(web::get().to(mask_png)))
+        .service(
+            super::resource("/api/v1/selections/{draft}/vertices").route(web::get().to(vertices)),
+        )
+        .service(
+            super::resource("/api/v1/selections/{draft}/confirm").route(web::post().to(confirm)),
+        )
+        .service(super::resource("/api/v1/parts/{id}/revisions").route(web::get().to(revisions)))
+        .service(
+            super::resource("/api/v1/parts/{id}/revisions/{number}/vertices")
+                .route(web::get().to(revision_vertices)),
+        );
 }
 
 // ---- request --------------------------------------------------------------------------------
@@ -396,8 +394,7 @@ impl Drafts {
         }
         let mut bytes: usize = map.values().map(|d| d.bytes()).sum::<usize>() + draft.bytes();
         while !map.is_empty() && (map.len() >= DRAFTS_TOTAL || bytes > DRAFT_BYTES) {
-            let Some(oldest) = map.values().min_by_key(|d| d.created).map(|d| d.id.clone())
-            else {
+            let Some(oldest) = map.values().min_by_key(|d| d.created).map(|d| d.id.clone()) else {
                 break;
             };
             if let Some(d) = map.remove(&oldest) {
@@ -433,8 +430,16 @@ pub fn base64(bytes: &[u8]) -> String {
             | c.get(2).copied().unwrap_or(0) as u32;
         out.push(A[(n >> 18) as usize & 63] as char);
         out.push(A[(n >> 12) as usize & 63] as char);
-        out.push(if c.len() > 1 { A[(n >> 6) as usize & 63] as char } else { '=' });
-        out.push(if c.len() > 2 { A[n as usize & 63] as char } else { '=' });
+        out.push(if c.len() > 1 {
+            A[(n >> 6) as usize & 63] as char
+        } else {
+            '='
+        });
+        out.push(if c.len() > 2 {
+            A[n as usize & 63] as char
+        } else {
+            '='
+        });
     }
     out
 }

@@ -105,8 +105,17 @@ pub fn add_user(data_dir: &Path, name: &str, role: &str, password: &str) -> std:
         .expect("spawn user add");
     // The command may reject its arguments and exit before reading stdin: a broken pipe
     // here is expected then, and the exit status tells the rest.
-    if let Err(e) = child.stdin.take().expect("stdin").write_all(format!("{password}\n").as_bytes()) {
-        assert_eq!(e.kind(), std::io::ErrorKind::BrokenPipe, "write password: {e}");
+    if let Err(e) = child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(format!("{password}\n").as_bytes())
+    {
+        assert_eq!(
+            e.kind(),
+            std::io::ErrorKind::BrokenPipe,
+            "write password: {e}"
+        );
     }
     child.wait_with_output().expect("user add output")
 }

@@ -244,9 +244,9 @@ fn render_images_buffers_callouts_and_part_views() {
         assert!((len - 1.0).abs() < 1e-2, "normal {n:?}");
         // The scan's vertex with that id projects next to the pixel.
         let p = glam::Vec3::from(mesh.positions[vertex[i] as usize]);
-        if let Some((x, y, _)) = cam.project(p) {
+        if let Some((sx, sy, _)) = cam.project(p) {
             let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-            if (x - px).hypot(y - py) <= 4.0 {
+            if (sx - px).hypot(sy - py) <= 4.0 {
                 near += 1;
             }
         }

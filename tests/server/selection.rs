@@ -87,7 +87,11 @@ fn heavy(x0: u32, y0: u32, x1: u32, y1: u32, t: u32) -> StrokeMask {
     labels(|x, y| {
         let outer = x + t >= x0 && x < x1 + t && y + t >= y0 && y < y1 + t;
         let inner = x >= x0 + t && x + t < x1 && y >= y0 + t && y + t < y1;
-        if outer && !inner { mask::HEAVY } else { mask::NONE }
+        if outer && !inner {
+            mask::HEAVY
+        } else {
+            mask::NONE
+        }
     })
 }
 
@@ -134,21 +138,34 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     assert!(n1 > 100, "{d1}");
     assert_eq!(d1["kind"], "region");
     assert_eq!(d1["selected_pixels"].as_u64(), Some(120 * 100));
-    assert!(d1["mask"].as_str().unwrap().starts_with("data:image/png;base64,"));
+    assert!(
+        d1["mask"]
+            .as_str()
+            .unwrap()
+            .starts_with("data:image/png;base64,")
+    );
     let c = &d1["center"];
-    assert!(c[0].as_f64().unwrap().abs() < 0.3 && c[1].as_f64().unwrap().abs() < 0.3, "{d1}");
+    assert!(
+        c[0].as_f64().unwrap().abs() < 0.3 && c[1].as_f64().unwrap().abs() < 0.3,
+        "{d1}"
+    );
     let s1 = draft_set(&alice, &id1);
     assert_eq!(s1.len(), n1);
     let png = alice.get(&format!("/api/v1/selections/{id1}/mask"));
     assert_eq!(png.status, 200);
     assert_eq!(png.header("content-type"), Some("image/png"));
-    assert_eq!(alice.get(&format!("/api/v1/selections/{id1}")).json()["id"], id1);
+    assert_eq!(
+        alice.get(&format!("/api/v1/selections/{id1}")).json()["id"],
+        id1
+    );
 
     // Drafts belong to their user.
-    bob.get(&format!("/api/v1/selections/{id1}")).assert_error(404);
+    bob.get(&format!("/api/v1/selections/{id1}"))
+        .assert_error(404);
     bob.post(&format!("/api/v1/selections/{id1}/confirm"), &json!({}))
         .assert_error(404);
-    bob.delete(&format!("/api/v1/selections/{id1}")).assert_error(404);
+    bob.delete(&format!("/api/v1/selections/{id1}"))
+        .assert_error(404);
 
     // Confirm: a region part holding exactly the draft's vertices.
     let r = alice.post(&format!("/api/v1/selections/{id1}/confirm"), &json!({}));
@@ -157,7 +174,10 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     let pid = part["id"].as_i64().unwrap();
     assert_eq!(part["kind"], "region");
     assert_eq!(part["vertex_count"].as_u64(), Some(n1));
-    assert_eq!(set_of(&alice.get(&format!("/api/v1/parts/{pid}/vertices"))), s1);
+    assert_eq!(
+        set_of(&alice.get(&format!("/api/v1/parts/{pid}/vertices"))),
+        s1
+    );
     // The draft is gone once confirmed.
     alice
         .get(&format!("/api/v1/selections/{id1}"))
@@ -193,7 +213,10 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     let r = select(&alice, model, &req, &markup);
     assert_eq!(r.status, 201, "{}", r.text());
     let d3 = r.json();
-    assert!(d3["removed"].as_u64().unwrap() > 0 && d3["added"] == 0, "{d3}");
+    assert!(
+        d3["removed"].as_u64().unwrap() > 0 && d3["added"] == 0,
+        "{d3}"
+    );
     let s3 = draft_set(&alice, d3["id"].as_str().unwrap());
     assert!(s3.is_subset(&s2) && s3.len() < s2.len());
 
@@ -202,7 +225,10 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     let r = select(&bob, model, &req, &lasso(20, 20, 60, 60));
     assert_eq!(r.status, 201, "{}", r.text());
     let bob_draft = r.json()["id"].as_str().unwrap().to_string();
-    let r = bob.post(&format!("/api/v1/selections/{bob_draft}/confirm"), &json!({}));
+    let r = bob.post(
+        &format!("/api/v1/selections/{bob_draft}/confirm"),
+        &json!({}),
+    );
     assert_eq!(r.status, 200, "{}", r.text());
     let msg = alice
         .post(
@@ -240,7 +266,11 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
         .iter()
         .map(|e| e["action"].as_str().unwrap().to_string())
         .collect();
-    assert_eq!(actions.iter().filter(|a| *a == "part.update").count(), 2, "{actions:?}");
+    assert_eq!(
+        actions.iter().filter(|a| *a == "part.update").count(),
+        2,
+        "{actions:?}"
+    );
     assert!(actions.contains(&"part.create".to_string()));
 
     // A point part from a click (plain JSON, no mask).
@@ -293,7 +323,11 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     });
     for (id, set, is_left) in &runs {
         assert_eq!(set, if *is_left { &alone_left } else { &alone_right });
-        let (owner, other) = if *is_left { (&alice, &bob) } else { (&bob, &alice) };
+        let (owner, other) = if *is_left {
+            (&alice, &bob)
+        } else {
+            (&bob, &alice)
+        };
         assert_eq!(owner.get(&format!("/api/v1/selections/{id}")).status, 200);
         other
             .get(&format!("/api/v1/selections/{id}"))
@@ -301,8 +335,13 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     }
 
     // Roles: viewers may not select.
-    select(&viewer, model, &json!({"tool": "lasso", "camera": camera()}), &left)
-        .assert_error(403);
+    select(
+        &viewer,
+        model,
+        &json!({"tool": "lasso", "camera": camera()}),
+        &left,
+    )
+    .assert_error(403);
     select(
         &server.client(),
         model,
@@ -316,16 +355,26 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     let small = StrokeMask::new(32, 24, vec![mask::LASSO; 32 * 24]).unwrap();
     let msg = select(&alice, model, &lasso_req, &small).assert_error(400);
     assert!(msg.contains("32x24") && msg.contains("320x240"), "{msg}");
-    let msg = select_with(&alice, model, &lasso_req, Some((b"GIF89a not a png", "image/png")))
-        .assert_error(415);
+    let msg = select_with(
+        &alice,
+        model,
+        &lasso_req,
+        Some((b"GIF89a not a png", "image/png")),
+    )
+    .assert_error(415);
     assert!(msg.contains("PNG"), "{msg}");
-    select_with(&alice, model, &lasso_req, Some((&left.encode_png(), "image/jpeg")))
-        .assert_error(415);
+    select_with(
+        &alice,
+        model,
+        &lasso_req,
+        Some((&left.encode_png(), "image/jpeg")),
+    )
+    .assert_error(415);
     let mut bad = left.clone();
     bad.labels[5] = 9;
     let bad_png = bad.encode_png();
-    let msg = select_with(&alice, model, &lasso_req, Some((&bad_png, "image/png")))
-        .assert_error(400);
+    let msg =
+        select_with(&alice, model, &lasso_req, Some((&bad_png, "image/png"))).assert_error(400);
     assert!(msg.contains("value 9"), "{msg}");
     let empty = StrokeMask::empty(W, H).unwrap();
     let msg = select(&alice, model, &lasso_req, &empty).assert_error(400);
@@ -344,21 +393,49 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     )
     .assert_error(400);
     assert!(msg.contains("enclose"), "{msg}");
-    let fg_only = labels(|x, _| if x == 160 { mask::FOREGROUND } else { mask::NONE });
-    let msg = select(&alice, model, &json!({"tool": "markup", "camera": camera()}), &fg_only)
-        .assert_error(400);
+    let fg_only = labels(|x, _| {
+        if x == 160 {
+            mask::FOREGROUND
+        } else {
+            mask::NONE
+        }
+    });
+    let msg = select(
+        &alice,
+        model,
+        &json!({"tool": "markup", "camera": camera()}),
+        &fg_only,
+    )
+    .assert_error(400);
     assert!(msg.contains("background"), "{msg}");
     let away = json!({"eye": [0.0, 0.0, 3.2], "target": [0.0, 0.0, 6.0], "up": [0.0, 1.0, 0.0],
                       "fovy": 40.0, "width": W, "height": H});
-    let msg = select(&alice, model, &json!({"tool": "lasso", "camera": away}), &left)
-        .assert_error(400);
+    let msg = select(
+        &alice,
+        model,
+        &json!({"tool": "lasso", "camera": away}),
+        &left,
+    )
+    .assert_error(400);
     assert!(msg.contains("sees nothing"), "{msg}");
     let mut bad_cam = camera();
     bad_cam["fovy"] = json!(0.0);
-    select(&alice, model, &json!({"tool": "lasso", "camera": bad_cam}), &left).assert_error(400);
+    select(
+        &alice,
+        model,
+        &json!({"tool": "lasso", "camera": bad_cam}),
+        &left,
+    )
+    .assert_error(400);
     let mut huge = camera();
     huge["width"] = json!(100_000);
-    select(&alice, model, &json!({"tool": "lasso", "camera": huge}), &left).assert_error(400);
+    select(
+        &alice,
+        model,
+        &json!({"tool": "lasso", "camera": huge}),
+        &left,
+    )
+    .assert_error(400);
     select_with(&alice, model, &lasso_req, None).assert_error(400);
     let msg = alice
         .request(
@@ -370,8 +447,13 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
         )
         .assert_error(415);
     assert!(msg.contains("multipart"), "{msg}");
-    select_with(&alice, model, &json!({"tool": "lasso"}), Some((&left.encode_png(), "image/png")))
-        .assert_error(400);
+    select_with(
+        &alice,
+        model,
+        &json!({"tool": "lasso"}),
+        Some((&left.encode_png(), "image/png")),
+    )
+    .assert_error(400);
     let msg = select(
         &alice,
         model,
@@ -399,9 +481,15 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     let r = select(&alice, model, &lasso_req, &left);
     let id = r.json()["id"].as_str().unwrap().to_string();
     alice
-        .post(&format!("/api/v1/selections/{id}/confirm"), &json!({"kind": "blob"}))
+        .post(
+            &format!("/api/v1/selections/{id}/confirm"),
+            &json!({"kind": "blob"}),
+        )
         .assert_error(400);
-    assert_eq!(alice.delete(&format!("/api/v1/selections/{id}")).status, 204);
+    assert_eq!(
+        alice.delete(&format!("/api/v1/selections/{id}")).status,
+        204
+    );
     // A model still building (here: created without a scan, pending).
     let r = admin.post("/api/v1/models", &json!({"title": "Not built"}));
     assert_eq!(r.status, 201, "{}", r.text());

@@ -753,9 +753,12 @@ mod tests {
         }
         // And the filter's round trip stays within its 6-bit precision.
         let colours: Vec<[u8; 4]> = (0..4096u32)
-            .map(|i| [(i * 7) as u8, (i * 13 >> 2) as u8, (i >> 4) as u8, 255])
+            .map(|i| [(i * 7) as u8, ((i * 13) >> 2) as u8, (i >> 4) as u8, 255])
             .collect();
-        let unit: Vec<[f32; 4]> = colours.iter().map(|c| c.map(|x| x as f32 / 255.0)).collect();
+        let unit: Vec<[f32; 4]> = colours
+            .iter()
+            .map(|c| c.map(|x| x as f32 / 255.0))
+            .collect();
         let mut back: Vec<[u8; 4]> = meshopt::encode_filter_color(&unit, COLOR_BITS);
         decode_ycocg(&mut back);
         for (c, b) in colours.iter().zip(&back) {

@@ -141,7 +141,9 @@ pub fn back_project(
 ) -> Result<BackProjection, SelectError> {
     let t0 = Instant::now();
     buffers.check()?;
-    camera.validate().map_err(|e| SelectError::BadParams(e.to_string()))?;
+    camera
+        .validate()
+        .map_err(|e| SelectError::BadParams(e.to_string()))?;
     if camera.width != buffers.width || camera.height != buffers.height {
         return Err(SelectError::SizeMismatch {
             what: "the camera's viewport",
@@ -160,9 +162,8 @@ pub fn back_project(
             height: buffers.height,
         });
     }
-    if !(options.depth_tolerance_px.is_finite() && options.depth_tolerance_px >= 0.0)
-        || !(-1.0..=1.0).contains(&options.min_facing)
-    {
+    let tolerance_ok = options.depth_tolerance_px.is_finite() && options.depth_tolerance_px >= 0.0;
+    if !tolerance_ok || !(-1.0..=1.0).contains(&options.min_facing) {
         return Err(SelectError::BadParams(
             "depth_tolerance_px must be >= 0 and min_facing within [-1, 1]".into(),
         ));
@@ -173,8 +174,8 @@ pub fn back_project(
     // 1. Patches drawn under the selection (the index image).
     let mut drawn = vec![false; nodes.len()];
     let mut any = false;
-    for i in 0..selected.len() {
-        if selected[i] && buffers.covered(i) {
+    for (i, &sel) in selected.iter().enumerate() {
+        if sel && buffers.covered(i) {
             let n = buffers.node[i] as usize;
             if n < nodes.len() {
                 drawn[n] = true;
@@ -192,7 +193,9 @@ pub fn back_project(
     // 2. Down the DAG to the leaves.
     let integral = Integral::new(selected, w, h);
     let mut visited = vec![false; nodes.len()];
-    let mut stack: Vec<u32> = (0..nodes.len() as u32).filter(|&n| drawn[n as usize]).collect();
+    let mut stack: Vec<u32> = (0..nodes.len() as u32)
+        .filter(|&n| drawn[n as usize])
+        .collect();
     for &n in &stack {
         visited[n as usize] = true;
     }
@@ -311,13 +314,13 @@ pub fn back_project(
     out.vertices = RoaringBitmap::from_sorted_iter(hits.iter().map(|h| h.0))
         .map_err(|e| SelectError::BadParams(format!("unsorted ids: {e}")))?;
     for &(id, p, _) in &hits {
-        for k in 0..3 {
-            out.sum[k] += p[k] as f64;
+        for (s, &c) in out.sum.iter_mut().zip(&p) {
+            *s += c as f64;
         }
         if base.is_some_and(|b| b.contains(id)) {
             out.count_in_base += 1;
-            for k in 0..3 {
-                out.sum_in_base[k] += p[k] as f64;
+            for (s, &c) in out.sum_in_base.iter_mut().zip(&p) {
+                *s += c as f64;
             }
         }
     }

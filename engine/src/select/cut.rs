@@ -44,7 +44,14 @@ fn window(seeds: &Seeds) -> Option<(usize, usize, usize, usize)> {
             y1 = y1.max(y + 1);
         }
     }
-    (x0 != usize::MAX).then(|| (x0.saturating_sub(1), y0.saturating_sub(1), (x1 + 1).min(w), (y1 + 1).min(h)))
+    (x0 != usize::MAX).then(|| {
+        (
+            x0.saturating_sub(1),
+            y0.saturating_sub(1),
+            (x1 + 1).min(w),
+            (y1 + 1).min(h),
+        )
+    })
 }
 
 /// Solves eq. 1 for `seeds` on `buffers`: returns per pixel whether it is foreground (always

@@ -89,7 +89,11 @@ impl EnergyParams {
 
 #[inline]
 fn rgb(c: [u8; 4]) -> [f32; 3] {
-    [c[0] as f32 / 255.0, c[1] as f32 / 255.0, c[2] as f32 / 255.0]
+    [
+        c[0] as f32 / 255.0,
+        c[1] as f32 / 255.0,
+        c[2] as f32 / 255.0,
+    ]
 }
 
 #[inline]
@@ -124,10 +128,11 @@ fn kmeans(points: &[[f32; 3]], k: usize, unit: bool) -> Vec<[f32; 3]> {
     let mut centres = vec![pts[0]];
     let mut nearest: Vec<f32> = pts.iter().map(|p| dist2(*p, pts[0])).collect();
     while centres.len() < k {
-        let (far, d) = nearest
-            .iter()
-            .enumerate()
-            .fold((0, 0.0f32), |acc, (i, &d)| if d > acc.1 { (i, d) } else { acc });
+        let (far, d) =
+            nearest.iter().enumerate().fold(
+                (0, 0.0f32),
+                |acc, (i, &d)| if d > acc.1 { (i, d) } else { acc },
+            );
         if d <= 1e-10 {
             break;
         }
@@ -146,8 +151,8 @@ fn kmeans(points: &[[f32; 3]], k: usize, unit: bool) -> Vec<[f32; 3]> {
         }
         let mut sums = vec![([0f64; 3], 0usize); centres.len()];
         for (&a, p) in assign.iter().zip(&pts) {
-            for k in 0..3 {
-                sums[a].0[k] += p[k] as f64;
+            for (s, &c) in sums[a].0.iter_mut().zip(p) {
+                *s += c as f64;
             }
             sums[a].1 += 1;
         }
@@ -296,12 +301,9 @@ impl Smoothness {
                 if !buffers.covered(i) {
                     continue;
                 }
-                for j in [
-                    (x + 1 < w).then(|| i + 1),
-                    (y + 1 < h).then(|| i + w),
-                ]
-                .into_iter()
-                .flatten()
+                for j in [(x + 1 < w).then(|| i + 1), (y + 1 < h).then(|| i + w)]
+                    .into_iter()
+                    .flatten()
                 {
                     if buffers.covered(j) {
                         let d = differences(buffers, i, j);
@@ -321,7 +323,11 @@ impl Smoothness {
         let mut beta = [0f32; 3];
         let mut weight = [0f32; 3];
         for k in 0..3 {
-            let mean = if count > 0 { sum[k] / count as f64 } else { 0.0 };
+            let mean = if count > 0 {
+                sum[k] / count as f64
+            } else {
+                0.0
+            };
             if mean > 1e-12 {
                 beta[k] = (1.0 / (2.0 * mean)) as f32;
                 weight[k] = weights[k];
@@ -339,9 +345,9 @@ impl Smoothness {
     #[inline]
     pub fn weight_of(&self, d: [f32; 3]) -> f32 {
         let mut s = 0.0;
-        for k in 0..3 {
-            if self.weight[k] > 0.0 {
-                s += self.weight[k] * (-self.beta[k] * d[k] * d[k]).exp();
+        for ((&w, &beta), &dk) in self.weight.iter().zip(&self.beta).zip(&d) {
+            if w > 0.0 {
+                s += w * (-beta * dk * dk).exp();
             }
         }
         s
@@ -375,7 +381,12 @@ mod tests {
             [0, 0, 255, 255],
             [0, 255, 0, 255],
         ];
-        b.normal = vec![[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        b.normal = vec![
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
         let v = b.view();
         let m = SeedModel::fit(&v, &[0, 1, 2], 2);
         assert_eq!(m.colors.len(), 2);

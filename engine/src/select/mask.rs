@@ -101,7 +101,8 @@ impl StrokeMask {
         if !bytes.starts_with(MAGIC) {
             return Err(MaskError::NotPng);
         }
-        let mut reader = image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Png);
+        let mut reader =
+            image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Png);
         let mut limits = image::Limits::default();
         limits.max_image_width = Some(MAX_SIDE);
         limits.max_image_height = Some(MAX_SIDE);
@@ -118,7 +119,9 @@ impl StrokeMask {
         let labels: Vec<u8> = match img {
             image::DynamicImage::ImageLuma8(g) => g.into_raw(),
             image::DynamicImage::ImageLumaA8(g) => g.pixels().map(|p| p.0[0]).collect(),
-            image::DynamicImage::ImageRgb8(g) => grey(g.pixels().map(|p| [p.0[0], p.0[1], p.0[2]]))?,
+            image::DynamicImage::ImageRgb8(g) => {
+                grey(g.pixels().map(|p| [p.0[0], p.0[1], p.0[2]]))?
+            }
             image::DynamicImage::ImageRgba8(g) => {
                 grey(g.pixels().map(|p| [p.0[0], p.0[1], p.0[2]]))?
             }

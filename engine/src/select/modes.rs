@@ -13,7 +13,9 @@ use roaring::RoaringBitmap;
 use super::backproject::{BackProjection, nearest};
 
 /// How a new selection combines with the existing set.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Mode {
     /// The new selection replaces the set.
@@ -143,7 +145,10 @@ mod tests {
         let r = combine(&base, &new, Mode::Replace);
         assert_eq!(r.vertices.iter().collect::<Vec<_>>(), vec![3, 4, 5, 6]);
         let a = combine(&base, &new, Mode::Add);
-        assert_eq!(a.vertices.iter().collect::<Vec<_>>(), vec![1, 2, 3, 4, 5, 6]);
+        assert_eq!(
+            a.vertices.iter().collect::<Vec<_>>(),
+            vec![1, 2, 3, 4, 5, 6]
+        );
         assert_eq!(a.sum[0], 21.0);
         assert_eq!(a.centroid().unwrap()[0], 3.5);
         let s = combine(&base, &new, Mode::Subtract);

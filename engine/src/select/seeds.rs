@@ -73,8 +73,7 @@ pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectE
     let mut role = vec![UNKNOWN; n];
     let (mut fg, mut bg) = (Vec::new(), Vec::new());
     let (mut fg_drawn, mut bg_drawn) = (false, false);
-    for i in 0..n {
-        let label = mask.labels[i];
+    for (i, &label) in mask.labels.iter().enumerate().take(n) {
         fg_drawn |= label == mask::FOREGROUND;
         bg_drawn |= label == mask::BACKGROUND;
         if !buffers.covered(i) {
@@ -176,12 +175,7 @@ fn neighbours8(i: usize, width: usize, height: usize) -> impl Iterator<Item = us
 }
 
 /// Chamfer distance (1, √2) within `region` from the `sources` (multi-source Dijkstra).
-fn distance_within(
-    region: &[bool],
-    sources: &[usize],
-    width: usize,
-    height: usize,
-) -> Vec<f32> {
+fn distance_within(region: &[bool], sources: &[usize], width: usize, height: usize) -> Vec<f32> {
     let mut dist = vec![f32::INFINITY; region.len()];
     // Distances in 1/1024 px as integers keep the heap ordering total.
     let mut heap: BinaryHeap<Reverse<(u32, u32)>> = BinaryHeap::new();
@@ -410,7 +404,10 @@ mod tests {
         assert!(e.contains("miss the model"), "{e}");
         m.labels[30] = mask::BACKGROUND;
         let s = markup(&m, &v).unwrap();
-        assert_eq!((s.role[5], s.role[30], s.role[80], s.role[6]), (FG, BG, OFF, UNKNOWN));
+        assert_eq!(
+            (s.role[5], s.role[30], s.role[80], s.role[6]),
+            (FG, BG, OFF, UNKNOWN)
+        );
     }
 
     #[test]
