@@ -31,6 +31,9 @@ pub struct Args {
     /// Keep the LOD file here (default: a scratch directory, removed afterwards).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// zstd level of the patch blobs (default: the build's; 0 stores them uncompressed).
+    #[arg(long, value_parser = clap::value_parser!(i32).range(0..=22))]
+    pub zstd_level: Option<i32>,
 }
 
 /// One reference measurement of `nxsbuild`.
@@ -156,6 +159,7 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         max_patch_triangles: args.max_patch_triangles as usize,
         memory_budget: args.memory.min(usize::MAX as u64) as usize,
         threads: args.threads,
+        zstd_level: args.zstd_level.unwrap_or(BuildOptions::default().zstd_level),
         ..BuildOptions::default()
     };
     let bytes = std::fs::metadata(&input).map(|m| m.len()).unwrap_or(0);
