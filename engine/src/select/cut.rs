@@ -3,7 +3,8 @@
 //! pixels"; the labelling minimising eq. 1 is the minimum cut, found with the min-cut/max-flow
 //! algorithm of Boykov and Kolmogorov ([`super::maxflow_grid`]).
 //!
-//! t-links carry the data term (eq. 2–3, plus the heavy lasso's band prior), hard seeds a
+//! t-links carry the data term (eq. 2–3, plus the heavy lasso's band prior or markup's
+//! geodesic stroke distance), hard seeds a
 //! capacity of [`HARD`]; n-links carry `λ·E2` (eq. 4). Only pixels showing the model are in
 //! the graph: every link of a pixel off the model is zero. The grid is cropped to the bounding
 //! box of the pixels the cut decides (one pixel of margin): outside it every pixel is a seed.
@@ -116,6 +117,12 @@ pub fn graph_cut(
                     {
                         cf += params.band_prior * pos[g];
                         cb += params.band_prior * (1.0 - pos[g]);
+                    }
+                    if let Some(pos) = &seeds.stroke_position
+                        && params.w_geo > 0.0
+                    {
+                        cf += params.w_geo * pos[g];
+                        cb += params.w_geo * (1.0 - pos[g]);
                     }
                     // Cutting the source link puts the pixel in the background.
                     source[l] = cb;

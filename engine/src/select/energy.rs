@@ -17,6 +17,19 @@
 //! Jolly's contrast normalisation), so one set of weights works at any scale. A cue that is
 //! constant over the view (a scan without colour) carries no boundary and is left out.
 //! Diagonal edges are divided by √2 (8-connected grid, as the paper's graph).
+//!
+//! **Stroke distance (markup).** Scans without colour leave eq. 3 only normals, which are
+//! weak (a smooth part shows every normal) and ambiguous (far surfaces face the same way), so
+//! the cut either shrinks onto the strokes or floods every similarly facing surface. Markup
+//! therefore adds a geodesic data term ([`EnergyParams::w_geo`]) in the spirit of Bai &
+//! Sapiro's geodesic segmentation ("A geodesic framework for fast interactive image and video
+//! segmentation and matting", ICCV 2007) and Criminisi et al.'s GeoS (ECCV 2008): with `D^F`,
+//! `D^B` the geodesic distances to the nearest foreground / background stroke over the
+//! 8-connected pixel graph, a pixel costs `D^F / (D^F + D^B)` as foreground and
+//! `D^B / (D^F + D^B)` as background — the same normalised form as eq. 3. The path length
+//! grows steeply across normal creases and depth discontinuities (the geometric edges where
+//! PSB regions meet), so strokes claim the surface they lie on up to its edges (see
+//! [`super::seeds::markup`]).
 
 use super::SelectError;
 use super::buffers::Buffers;
@@ -42,6 +55,9 @@ pub struct EnergyParams {
     /// without any image cue the cut follows the middle of the stroke rather than hugging the
     /// shorter inner edge (graph cuts' shrinking bias). 0 disables it.
     pub band_prior: f32,
+    /// Markup only: weight of the geodesic stroke-distance data term (module documentation).
+    /// 0 disables it.
+    pub w_geo: f32,
 }
 
 impl Default for EnergyParams {
@@ -53,6 +69,7 @@ impl Default for EnergyParams {
             lambda: 2.0,
             clusters: 4,
             band_prior: 0.25,
+            w_geo: 2.0,
         }
     }
 }
@@ -69,6 +86,7 @@ impl EnergyParams {
             ("w_d", self.w_d),
             ("lambda", self.lambda),
             ("band_prior", self.band_prior),
+            ("w_geo", self.w_geo),
         ];
         for (name, v) in w {
             if !(v.is_finite() && (0.0..=1e4).contains(&v)) {

@@ -44,6 +44,9 @@ pub struct Seeds {
     /// Heavy lasso: position across the band per pixel (0 inner marker … 1 outer marker),
     /// NaN outside the band.
     pub band_position: Option<Vec<f32>>,
+    /// Markup: relative geodesic distance to the strokes per pixel, `D^F / (D^F + D^B)`
+    /// (0 on a foreground stroke … 1 on a background stroke; see [`geodesic_from`]).
+    pub stroke_position: Option<Vec<f32>>,
 }
 
 impl Seeds {
@@ -66,7 +69,81 @@ fn check(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<(), SelectError> {
     Ok(())
 }
 
-/// Markup seeds (Lazy Snapping's foreground and background strokes).
+/// How much longer a step across a full normal crease or depth discontinuity is than a step
+/// on smooth surface (geodesic stroke distance of markup).
+const CREASE_COST: f32 = 40.0;
+
+/// Geodesic distance from the pixels `sources` over the covered 8-connected pixel graph
+/// (multi-source Dijkstra). A step costs its length in pixels (1 or √2) times
+/// `1 + CREASE_COST · c`, where `c = max(1 − g(N_ij), 1 − g(D_ij))` is how much of a geometric
+/// edge lies between the two pixels: `g` and its contrast normalisation are those of the
+/// smoothness term (eq. 4, [`super::energy::Smoothness`]), so a crease is measured against
+/// the view's own typical change. Pixels not reachable are `INFINITY`.
+pub fn geodesic_from(buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
+    use super::energy::{EnergyParams, Smoothness, differences};
+    let (w, h) = (buffers.width as usize, buffers.height as usize);
+    let smooth = Smoothness::estimate(buffers, &EnergyParams::default(), false);
+    let mut dist = vec![f32::INFINITY; w * h];
+    // Non-negative f32 distances order like their bit patterns.
+    let mut heap: BinaryHeap<Reverse<(u32, u32)>> = BinaryHeap::new();
+    for &s in sources {
+        let s = s as usize;
+        if s < dist.len() && buffers.covered(s) {
+            dist[s] = 0.0;
+            heap.push(Reverse((0, s as u32)));
+        }
+    }
+    while let Some(Reverse((d, i))) = heap.pop() {
+        let d = f32::from_bits(d);
+        let i = i as usize;
+        if d > dist[i] {
+            continue;
+        }
+        for j in neighbours8(i, w, h) {
+            if !buffers.covered(j) {
+                continue;
+            }
+            let diagonal = (j % w != i % w) && (j / w != i / w);
+            let diff = differences(buffers, i, j);
+            let mut crease = 0.0f32;
+            for k in 1..3 {
+                if smooth.weight[k] > 0.0 {
+                    crease = crease.max(1.0 - (-smooth.beta[k] * diff[k] * diff[k]).exp());
+                }
+            }
+            let step = if diagonal {
+                std::f32::consts::SQRT_2
+            } else {
+                1.0
+            };
+            let nd = d + step * (1.0 + CREASE_COST * crease);
+            if nd < dist[j] {
+                dist[j] = nd;
+                heap.push(Reverse((nd.to_bits(), j as u32)));
+            }
+        }
+    }
+    dist
+}
+
+/// `D^F / (D^F + D^B)` per pixel: 0 where only the foreground is reachable, 1 where only the
+/// background is, 0.5 where neither.
+fn relative_distance(d_fg: &[f32], d_bg: &[f32]) -> Vec<f32> {
+    d_fg.iter()
+        .zip(d_bg)
+        .map(|(&a, &b)| match (a.is_finite(), b.is_finite()) {
+            (true, true) if a + b > 0.0 => a / (a + b),
+            (true, true) => 0.5,
+            (true, false) => 0.0,
+            (false, true) => 1.0,
+            _ => 0.5,
+        })
+        .collect()
+}
+
+/// Markup seeds (Lazy Snapping's foreground and background strokes), with the relative
+/// geodesic distance to the strokes for the stroke-distance data term
+/// ([`super::EnergyParams::w_geo`]).
 pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectError> {
     check(mask, buffers)?;
     let n = buffers.len();
@@ -111,6 +188,10 @@ pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectE
         width: buffers.width,
         height: buffers.height,
         role,
+        stroke_position: Some(relative_distance(
+            &geodesic_from(buffers, &fg),
+            &geodesic_from(buffers, &bg),
+        )),
         fg_samples: fg,
         bg_samples: bg,
         band_position: None,
@@ -299,6 +380,7 @@ pub fn heavy_lasso(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, Se
         fg_samples: fg,
         bg_samples: bg,
         band_position: Some(position),
+        stroke_position: None,
     })
 }
 
