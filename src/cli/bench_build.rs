@@ -159,7 +159,9 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         max_patch_triangles: args.max_patch_triangles as usize,
         memory_budget: args.memory.min(usize::MAX as u64) as usize,
         threads: args.threads,
-        zstd_level: args.zstd_level.unwrap_or(BuildOptions::default().zstd_level),
+        zstd_level: args
+            .zstd_level
+            .unwrap_or(BuildOptions::default().zstd_level),
         ..BuildOptions::default()
     };
     let bytes = std::fs::metadata(&input).map(|m| m.len()).unwrap_or(0);

@@ -98,7 +98,12 @@ pub fn graph_cut(
     let mut down = vec![0f32; m];
     let mut down_right = vec![0f32; m];
     let mut down_left = vec![0f32; m];
-    let lambda = params.lambda;
+    // Markup's data term also carries the stroke distance, so it balances at its own λ.
+    let lambda = if seeds.stroke_position.is_some() {
+        params.markup_lambda
+    } else {
+        params.lambda
+    };
     let diagonal = lambda / std::f32::consts::SQRT_2;
     for ly in 0..wh {
         for lx in 0..ww {

@@ -58,6 +58,9 @@ pub struct EnergyParams {
     /// Markup only: weight of the geodesic stroke-distance data term (module documentation).
     /// 0 disables it.
     pub w_geo: f32,
+    /// Markup only: λ of markup, whose data term also carries the stroke distance and so
+    /// balances against a stronger smoothness term than the heavy lasso's.
+    pub markup_lambda: f32,
 }
 
 impl Default for EnergyParams {
@@ -69,7 +72,8 @@ impl Default for EnergyParams {
             lambda: 2.0,
             clusters: 4,
             band_prior: 0.25,
-            w_geo: 2.0,
+            w_geo: 4.0,
+            markup_lambda: 6.0,
         }
     }
 }
@@ -87,6 +91,7 @@ impl EnergyParams {
             ("lambda", self.lambda),
             ("band_prior", self.band_prior),
             ("w_geo", self.w_geo),
+            ("markup_lambda", self.markup_lambda),
         ];
         for (name, v) in w {
             if !(v.is_finite() && (0.0..=1e4).contains(&v)) {

@@ -71,18 +71,25 @@ fn check(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<(), SelectError> {
 
 /// How much longer a step across a full normal crease or depth discontinuity is than a step
 /// on smooth surface (geodesic stroke distance of markup).
-const CREASE_COST: f32 = 40.0;
+const CREASE_COST: f32 = 120.0;
+
+/// Scale, in pixels, at which normal creases are measured for the stroke distance: a rounded
+/// crease spreads its turn over several pixels, each of which changes little.
+const CREASE_SCALE: usize = 4;
 
 /// Geodesic distance from the pixels `sources` over the covered 8-connected pixel graph
 /// (multi-source Dijkstra). A step costs its length in pixels (1 or √2) times
-/// `1 + CREASE_COST · c`, where `c = max(1 − g(N_ij), 1 − g(D_ij))` is how much of a geometric
-/// edge lies between the two pixels: `g` and its contrast normalisation are those of the
-/// smoothness term (eq. 4, [`super::energy::Smoothness`]), so a crease is measured against
-/// the view's own typical change. Pixels not reachable are `INFINITY`.
+/// `1 + CREASE_COST · c`, where `c = max(1 − g(E), 1 − g(D_ij))` is how much of a geometric
+/// edge lies between the two pixels: `E` is the larger normal change across either pixel
+/// measured at [`CREASE_SCALE`] pixels ([`normal_edges`]), `D_ij` their relative depth
+/// difference, and `g(x) = exp(−β x²)` with the contrast normalisation of the smoothness term
+/// (eq. 4, [`super::energy::Smoothness`]), so a crease is measured against the view's own
+/// typical change. Pixels not reachable are `INFINITY`.
 pub fn geodesic_from(buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
     use super::energy::{EnergyParams, Smoothness, differences};
     let (w, h) = (buffers.width as usize, buffers.height as usize);
     let smooth = Smoothness::estimate(buffers, &EnergyParams::default(), false);
+    let edge = normal_edges(buffers, CREASE_SCALE);
     let mut dist = vec![f32::INFINITY; w * h];
     // Non-negative f32 distances order like their bit patterns.
     let mut heap: BinaryHeap<Reverse<(u32, u32)>> = BinaryHeap::new();
@@ -106,9 +113,19 @@ pub fn geodesic_from(buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
             let diagonal = (j % w != i % w) && (j / w != i / w);
             let diff = differences(buffers, i, j);
             let mut crease = 0.0f32;
-            for k in 1..3 {
-                if smooth.weight[k] > 0.0 {
-                    crease = crease.max(1.0 - (-smooth.beta[k] * diff[k] * diff[k]).exp());
+            if let Some((e, beta)) = &edge {
+                let x = e[i].max(e[j]);
+                crease = 1.0 - (-beta * x * x).exp();
+            }
+            // Normal change between the two pixels where no scaled edge map, and depth.
+            let cues = if edge.is_some() { 2..3 } else { 1..3 };
+            for ((&weight, &beta), &x) in smooth.weight[cues.clone()]
+                .iter()
+                .zip(&smooth.beta[cues.clone()])
+                .zip(&diff[cues])
+            {
+                if weight > 0.0 {
+                    crease = crease.max(1.0 - (-beta * x * x).exp());
                 }
             }
             let step = if diagonal {
@@ -124,6 +141,47 @@ pub fn geodesic_from(buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
         }
     }
     dist
+}
+
+/// Normal change across each pixel at `scale` pixels: `max(1 − N(x−r)·N(x+r), 1 − N(y−r)·N(y+r))`
+/// over covered pixels, with its contrast normalisation `β = 1 / (2⟨e²⟩)`. `None` for a scale
+/// of 1 or below, or a view without normal change.
+fn normal_edges(buffers: &Buffers<'_>, scale: usize) -> Option<(Vec<f32>, f32)> {
+    if scale <= 1 {
+        return None;
+    }
+    let (w, h) = (buffers.width as usize, buffers.height as usize);
+    let r = scale;
+    let mut e = vec![0f32; w * h];
+    let (mut sum, mut count) = (0f64, 0u64);
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if !buffers.covered(i) {
+                continue;
+            }
+            let mut v = 0f32;
+            if x >= r && x + r < w {
+                let (a, b) = (i - r, i + r);
+                if buffers.covered(a) && buffers.covered(b) {
+                    v = v.max(1.0 - dot(buffers.normal[a], buffers.normal[b]));
+                }
+            }
+            if y >= r && y + r < h {
+                let (a, b) = (i - r * w, i + r * w);
+                if buffers.covered(a) && buffers.covered(b) {
+                    v = v.max(1.0 - dot(buffers.normal[a], buffers.normal[b]));
+                }
+            }
+            let v = v.max(0.0);
+            e[i] = v;
+            sum += (v as f64) * (v as f64);
+            count += 1;
+        }
+    }
+    let mean = if count > 0 { sum / count as f64 } else { 0.0 };
+    (mean > 1e-12).then(|| (e, (1.0 / (2.0 * mean)) as f32))
 }
 
 /// `D^F / (D^F + D^B)` per pixel: 0 where only the foreground is reachable, 1 where only the
@@ -490,6 +548,29 @@ mod tests {
             (s.role[5], s.role[30], s.role[80], s.role[6]),
             (FG, BG, OFF, UNKNOWN)
         );
+    }
+
+    #[test]
+    fn stroke_distance_is_long_across_a_crease() {
+        let (w, h) = (40u32, 10u32);
+        let mut b = OwnedBuffers::flat(w, h);
+        for i in 0..(w * h) as usize {
+            if i % w as usize >= 10 {
+                b.normal[i] = [0.6, 0.0, 0.8];
+            }
+        }
+        let v = b.view();
+        let mut m = StrokeMask::empty(w, h).unwrap();
+        for y in 1..h - 1 {
+            m.labels[(y * w + 2) as usize] = mask::FOREGROUND;
+            m.labels[(y * w + 30) as usize] = mask::BACKGROUND;
+        }
+        let s = markup(&m, &v).unwrap();
+        let p = s.stroke_position.as_ref().unwrap();
+        let at = |x: u32| p[(5 * w + x) as usize];
+        // Without the crease the two strokes would meet at x = 16; with it, at the crease.
+        assert!(at(2) == 0.0 && at(30) == 1.0);
+        assert!(at(7) < 0.5 && at(13) > 0.5, "{} {}", at(7), at(13));
     }
 
     #[test]
