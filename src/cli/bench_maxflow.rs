@@ -7,7 +7,6 @@
 //! Depends only on std, `anyhow` and the engine.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -376,24 +375,7 @@ impl Unpacked {
         ));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let unpacked = Unpacked { dir };
-        let mut zstd = Command::new("zstd")
-            .arg("-dc")
-            .arg(archive)
-            .stdout(Stdio::piped())
-            .spawn()
-            .context("running zstd (is it installed?)")?;
-        let pipe = zstd.stdout.take().context("zstd output")?;
-        let tar = Command::new("tar")
-            .arg("-x")
-            .arg("-C")
-            .arg(&unpacked.dir)
-            .stdin(pipe)
-            .status()
-            .context("running tar")?;
-        let z = zstd.wait().context("waiting for zstd")?;
-        if !z.success() || !tar.success() {
-            bail!("unpacking {} failed", archive.display());
-        }
+        crate::cli::untar::untar_zstd::<&str>(archive, &unpacked.dir, &[])?;
         Ok(unpacked)
     }
 }

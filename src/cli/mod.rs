@@ -13,6 +13,7 @@ pub mod import;
 pub mod lod;
 pub mod reindex;
 pub mod serve;
+pub mod untar;
 pub mod user;
 
 use std::path::PathBuf;

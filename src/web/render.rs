@@ -44,7 +44,9 @@ use meshwiki_engine::render::best_view::{BestViewOptions, framing_camera};
 use meshwiki_engine::render::callouts::{self, CalloutPart, CalloutStyle, LayoutOptions};
 use meshwiki_engine::render::encode::{self, ImageFormat};
 use meshwiki_engine::render::highlight::TINTS;
-use meshwiki_engine::render::{Cut, Highlight, Model, Outputs, RenderOptions, RenderStats};
+use meshwiki_engine::render::{
+    Cut, Frame, Highlight, Model, Outputs, RenderOptions, RenderStats, Renderer,
+};
 use roaring::RoaringBitmap;
 use serde::Deserialize;
 use serde_json::json;
@@ -494,6 +496,26 @@ fn highlights<'a>(
         .collect()
 }
 
+/// Draws the view-dependent cut of `params` for `camera`, with the highlights of `sets`.
+fn render_view(
+    r: &Renderer,
+    model: &Model,
+    camera: &Camera,
+    params: &Params,
+    sets: &[(i64, RoaringBitmap)],
+) -> Result<Frame, RenderServiceError> {
+    let marks = highlights(sets, params.parts.len(), params.hover);
+    let options = RenderOptions {
+        cut: Cut::View {
+            pixel_error: params.px,
+            culling: Culling::ALL,
+        },
+        outputs: params.outputs,
+        ..RenderOptions::default()
+    };
+    Ok(r.render(model, camera, &options, &marks)?)
+}
+
 /// A response body that keeps its render's memory reserved until it is sent.
 struct HeldBody {
     data: Option<web::Bytes>,
@@ -583,16 +605,7 @@ async fn image(
     let (result, hold) = p
         .service
         .run(ticket, move |r| -> Result<_, RenderServiceError> {
-            let marks = highlights(&sets, params.parts.len(), params.hover);
-            let options = RenderOptions {
-                cut: Cut::View {
-                    pixel_error: params.px,
-                    culling: Culling::ALL,
-                },
-                outputs: params.outputs,
-                ..RenderOptions::default()
-            };
-            let mut frame = r.render(&model, &camera, &options, &marks)?;
+            let mut frame = render_view(r, &model, &camera, &params, &sets)?;
             let mut color = frame
                 .color
                 .take()
@@ -647,16 +660,7 @@ async fn buffers(
     let (result, hold) = p
         .service
         .run(ticket, move |r| -> Result<_, RenderServiceError> {
-            let marks = highlights(&sets, params.parts.len(), params.hover);
-            let options = RenderOptions {
-                cut: Cut::View {
-                    pixel_error: params.px,
-                    culling: Culling::ALL,
-                },
-                outputs: params.outputs,
-                ..RenderOptions::default()
-            };
-            let frame = r.render(&model, &camera, &options, &marks)?;
+            let frame = render_view(r, &model, &camera, &params, &sets)?;
             Ok(buffers_body(frame, &camera, &params))
         })
         .await?;

@@ -231,26 +231,8 @@ impl Psb {
                 }
                 std::fs::create_dir_all(scratch)
                     .with_context(|| format!("creating {}", scratch.display()))?;
-                let mut zstd = Command::new("zstd")
-                    .arg("-dc")
-                    .arg(archive)
-                    .stdout(Stdio::piped())
-                    .spawn()
-                    .context("running zstd (is it installed?)")?;
-                let pipe = zstd.stdout.take().context("zstd output")?;
-                let tar = Command::new("tar")
-                    .arg("-x")
-                    .arg("-C")
-                    .arg(scratch)
-                    .arg("--")
-                    .args(wanted.iter().flat_map(|(o, s)| [o, s]))
-                    .stdin(pipe)
-                    .status()
-                    .context("running tar")?;
-                let z = zstd.wait().context("waiting for zstd")?;
-                if !z.success() || !tar.success() {
-                    bail!("unpacking {} failed", archive.display());
-                }
+                let members: Vec<&String> = wanted.iter().flat_map(|(o, s)| [o, s]).collect();
+                crate::cli::untar::untar_zstd(archive, scratch, &members)?;
                 Ok(wanted
                     .into_iter()
                     .map(|(o, s)| (scratch.join(o), scratch.join(s)))
