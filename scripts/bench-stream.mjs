@@ -129,6 +129,9 @@ async function main() {
       const total = r.rows.reduce((s, x) => s + x.bytes, 0);
       const time = r.rows.reduce((s, x) => s + x.ms, 0);
       console.log(`    total          ${String(time).padStart(8)} ms  ${mb(total)}   = ${((100 * total) / table.leafBytes).toFixed(1)}% of the full-resolution patches, ${((100 * total) / statSync(mesh.path).size).toFixed(1)}% of the scan file`);
+      const byLevel = r.stats.bytesByLevel || [];
+      const leaf = byLevel[0] || 0;
+      console.log(`    by level (0 = full resolution): ${byLevel.map((b, l) => `L${l} ${(b / 1e6).toFixed(2)}`).join(', ')} MB; full-resolution patches fetched: ${((100 * leaf) / table.leafBytes).toFixed(0)}% of them`);
     }
     const plainTotal = plain.rows.reduce((s, x) => s + x.bytes, 0);
     const fovTotal = foveated.rows.reduce((s, x) => s + x.bytes, 0);

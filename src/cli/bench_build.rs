@@ -177,6 +177,17 @@ fn bench(args: &Args) -> anyhow::Result<()> {
                 std::thread::available_parallelism().map_or(1, |n| n.get())
             ))
     );
+    if let Some(load) = load_average() {
+        // Other work on the cores (a compile, a browser) slows the build 2x or more.
+        println!(
+            "  machine load (1-minute average) at start: {load:.2}{}",
+            if load > 0.5 {
+                " (other work on the cores now or just before: if it is still running, figures are not comparable)"
+            } else {
+                ""
+            }
+        );
+    }
     let bar = Bar::new();
     let report = run_build(&Source::File(input.clone()), &output, &options, &bar);
     bar.0.finish_and_clear();
@@ -201,4 +212,10 @@ fn display(p: &Path) -> String {
     p.file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| p.display().to_string())
+}
+
+/// The 1-minute load average (Linux `/proc/loadavg`).
+fn load_average() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    text.split_whitespace().next()?.parse().ok()
 }

@@ -128,11 +128,45 @@ test('a fovea refines its surroundings to the target and leaves the periphery co
   const all = new Uint8Array(t.nodeCount).fill(1);
   const cam = camera(t, 0.8);
   const fovea = [t.center[0], t.center[1], t.center[2] + 0.5 * t.radius];
-  const plain = new Cut(t).run(makeView(cam, foveation(t)), all, 0.002, [fovea]);
-  const fov = new Cut(t).run(makeView(cam, foveation(t, [fovea])), all, 0.002, [fovea]);
+  const plain = new Cut(t).run(makeView(cam, foveation(t)), all, 0, [fovea]);
+  const fov = new Cut(t).run(makeView(cam, foveation(t, [fovea])), all, 0, [fovea]);
   assert.ok(fov.foveaError <= 1 + 1e-6, `fovea not at 1 px: ${fov.foveaError}`);
   assert.ok(fov.triangles <= plain.triangles, `${fov.triangles} > ${plain.triangles}`);
   assert.ok(fov.maxError >= plain.maxError);
+});
+
+test('patches a visibility pass saw no pixel of stay coarse; the rest still reaches the target, watertight', () => {
+  const t = table;
+  const cam = camera(t, 0.9);
+  const all = new Uint8Array(t.nodeCount).fill(1);
+  const full = new Cut(t).run(makeView(cam, foveation(t)), all);
+  // A coarse cut (only the top levels loaded) is what a visibility pass saw; hide its
+  // patches on one side of the model.
+  let coarse = null;
+  for (let level = t.levelCount - 1; level >= 1; level--) {
+    const top = new Uint8Array(t.nodeCount);
+    for (let i = 0; i < t.nodeCount; i++) top[i] = t.level[i] >= level ? 1 : 0;
+    coarse = new Cut(t).run(makeView(cam, foveation(t)), top);
+    if (coarse.draw.length >= t.nodeCount / 5) break;
+  }
+  const occluded = new Uint8Array(t.nodeCount);
+  let hidden = 0;
+  for (const n of coarse.draw) {
+    if (t.bounds[n * 4] < t.center[0]) {
+      occluded[n] = 1;
+      hidden++;
+    }
+  }
+  assert.ok(hidden > 0 && hidden < coarse.draw.length, `hidden ${hidden} of ${coarse.draw.length}`);
+  const cut = new Cut(t);
+  const r = cut.run(makeView(cam, foveation(t)), all, 0, null, occluded);
+  assertCut(t, cut);
+  assert.ok(r.triangles < full.triangles, `occlusion saved nothing: ${r.triangles} vs ${full.triangles}`);
+  assert.ok(r.maxRatio <= 1 + 1e-6, `shown surface above target: ${r.maxRatio}`);
+  // Every hidden patch still drawn is one of those hidden (not refined) or was needed by a
+  // finer group that wants refinement next to the visible side.
+  const stillCoarse = r.draw.filter((n) => occluded[n]).length;
+  assert.ok(stillCoarse > 0, 'no hidden patch stayed coarse');
 });
 
 test('foveation follows the log transform and takes the nearest fovea', () => {

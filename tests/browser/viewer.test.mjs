@@ -174,6 +174,8 @@ test('a part created in one browser appears in a second within 5 seconds', async
   assert.ok(ms <= 5_000);
   // It is drawn like any part: its label appears in the watcher.
   await poll(watcher, (id) => document.querySelector(`.callout[data-part-id="${id}"]`)?.textContent, (v) => v === 'Fresh inscription', 5_000, partId);
+  // The page's list of parts below the viewer follows too, without a reload.
+  await poll(watcher, (id) => document.querySelector(`#model-parts #part-${id} h3`)?.textContent, (v) => !!v && v.includes('Fresh inscription'), 5_000, partId);
   await watcher.close();
   await editor.close();
 });

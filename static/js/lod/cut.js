@@ -80,19 +80,78 @@ export class Cut {
     this.inCut = new Uint8Array(table.nodeCount);
     this.visible = new Uint8Array(table.nodeCount);
     this.refined = new Uint8Array(table.groupCount);
+    /** Per group: refinement wanted for this view, after occlusion (see `wanted`). */
+    this.demand = new Uint8Array(table.groupCount);
+    this.hidden = new Uint8Array(table.groupCount);
+    this.ratio = new Float64Array(table.groupCount);
     /** Nodes that must stay in memory: the cut and, as fallback, the products it replaced. */
     this.pinned = new Uint8Array(table.nodeCount);
   }
 
-  /** Distance (model radii) from the nearest fovea to the nearest member of group `g`. */
+  /**
+   * Distance (model radii) from the nearest fovea to the nearest of group `g`'s own patches,
+   * members and products: a patch whose bounds hold a fovea then has its group, and so itself,
+   * refined to the target exactly.
+   */
   groupFoveaDistance(g, fov) {
     if (fov.foveae.length === 0) return Infinity;
     const b = this.t.bounds;
     let d = Infinity;
-    for (const m of this.t.members[g]) {
-      d = Math.min(d, foveaDistance(fov.foveae, b[m * 4], b[m * 4 + 1], b[m * 4 + 2], b[m * 4 + 3], fov.modelRadius));
+    for (const list of [this.t.members[g], this.t.products[g]]) {
+      for (const m of list) {
+        d = Math.min(d, foveaDistance(fov.foveae, b[m * 4], b[m * 4 + 1], b[m * 4 + 2], b[m * 4 + 3], fov.modelRadius));
+      }
     }
     return d;
+  }
+
+  /**
+   * Which groups want refinement for this view (`demand`, with `ratio` the projected error over
+   * the foveated threshold). Occlusion (visibility feedback, as virtual texturing's feedback
+   * buffer): a node is hidden when the last visibility pass drew it and it showed no pixel, or
+   * when the group it is a member of is hidden; a group is hidden when all its visible
+   * products are (coarsest first, so hiddenness flows down to the patches under a hidden
+   * one). A hidden group does not refine, so hidden surface is not streamed at full
+   * resolution; unless a finer group that does want refinement needs it, since a group
+   * refines only once all its products are in the cut (finest first, so that need is known).
+   */
+  wanted(view, occluded) {
+    const t = this.t;
+    const { visible, demand, ratio, hidden } = this;
+    const fov = view.foveation;
+    const gs = t.groupSphere;
+    const order = t.groupOrder;
+    hidden.fill(0);
+    if (occluded) {
+      for (const g of order) {
+        let anyVisible = false;
+        let shown = false;
+        for (const p of t.products[g]) {
+          if (!visible[p]) continue;
+          anyVisible = true;
+          const up = t.memberOf[p];
+          if (!occluded[p] && !(up >= 0 && hidden[up])) {
+            shown = true;
+            break;
+          }
+        }
+        hidden[g] = anyVisible && !shown ? 1 : 0;
+      }
+    }
+    for (let k = order.length - 1; k >= 0; k--) {
+      const g = order[k];
+      const r = projectedError(view, t.groupError[g], gs[g * 4], gs[g * 4 + 1], gs[g * 4 + 2], gs[g * 4 + 3]) / thresholdAt(fov, this.groupFoveaDistance(g, fov));
+      ratio[g] = r;
+      let want = r > 1;
+      if (want && hidden[g]) {
+        want = false;
+        for (const m of t.members[g]) {
+          const producer = t.producer[m];
+          if (producer >= 0 && demand[producer]) want = true;
+        }
+      }
+      demand[g] = want ? 1 : 0;
+    }
   }
 
   /**
@@ -100,11 +159,14 @@ export class Cut {
    * @param view from makeView
    * @param {Uint8Array} resident 1 for nodes whose patch is decoded and on the GPU
    * @param {number} foveaRadius distance (model radii) from a fovea within which drawn patches count for `foveaError`
+   *   (0: the patches whose bounds hold it)
    * @param {number[][]|null} probes points where `foveaError` is measured instead of the foveae
+   * @param {Uint8Array|null} occluded 1 for nodes drawn in the last visibility pass of this
+   *   view that showed no pixel (see `wanted`)
    * @returns {{draw: number[], requests: {node: number, priority: number}[], triangles: number,
    *   maxError: number, maxRatio: number, foveaError: number, pending: number}}
    */
-  run(view, resident, foveaRadius = 0.002, probes = null) {
+  run(view, resident, foveaRadius = 0, probes = null, occluded = null) {
     const t = this.t;
     const { inCut, visible, refined, pinned } = this;
     const fov = view.foveation;
@@ -123,8 +185,9 @@ export class Cut {
       inCut[r] = 1;
       ask(r, Infinity);
     }
+    this.wanted(view, occluded);
+    const { demand, ratio: ratios } = this;
     let pending = 0;
-    const gs = t.groupSphere;
     for (const g of t.groupOrder) {
       refined[g] = 0;
       const products = t.products[g];
@@ -132,12 +195,8 @@ export class Cut {
       let allIn = true;
       for (const p of products) if (!inCut[p]) allIn = false;
       if (!allIn) continue;
-      const cx = gs[g * 4];
-      const cy = gs[g * 4 + 1];
-      const cz = gs[g * 4 + 2];
-      const cr = gs[g * 4 + 3];
-      const ratio = projectedError(view, t.groupError[g], cx, cy, cz, cr) / thresholdAt(fov, this.groupFoveaDistance(g, fov));
-      const want = ratio > 1;
+      const ratio = ratios[g];
+      const want = demand[g] === 1;
       let membersReady = true;
       for (const m of members) if (visible[m] && !resident[m]) membersReady = false;
       let productsReady = true;
@@ -171,6 +230,8 @@ export class Cut {
       if (!inCut[i] || !visible[i] || !resident[i]) continue;
       draw.push(i);
       triangles += t.triangles[i];
+      // What no pixel shows has no visible error.
+      if (occluded && occluded[i]) continue;
       const cx = ls[i * 4];
       const cy = ls[i * 4 + 1];
       const cz = ls[i * 4 + 2];

@@ -14,10 +14,11 @@
 // point takes its nearest fovea, i.e. the best (smallest) threshold.
 //
 // The threshold is a property of a group, so its members and products decide together and
-// every cut stays watertight: the distance from the fovea to the nearest of the group's
-// members (their tight bounding spheres). Group error spheres contain all their descendants
-// and are large, so the distance to them would be zero for most of the model; the members'
-// tight bounds put the fovea's own patches at the target and the rest further out. A coarse
+// every cut stays watertight: the distance from the fovea to the nearest of the group's own
+// patches, members and products (their tight bounding spheres). Group error spheres contain
+// all their descendants and are large, so the distance to them would be zero for most of the
+// model; the patches' tight bounds put the fovea's own patches at the target and the rest
+// further out. A coarse
 // group may then want less refinement than one of its descendants; the cut is decided
 // coarsest first, so that descendant simply waits (never a hole).
 

@@ -51,9 +51,14 @@ export class Streamer {
     this.failed = new Map(); // node -> time of failure
     this.foveae = [];
     this.probes = null; // where the fovea error is measured (default: the foveae)
+    // Visibility feedback (cut.js `wanted`): drawn nodes the last visibility pass showed no
+    // pixel of, and the camera and drawn set that pass saw.
+    this.occluded = new Uint8Array(this.table.nodeCount);
+    this.visibilityKey = null;
+    this.viewKey = null;
     this.tokens = 0;
     this.tokensAt = performance.now();
-    this.stats = { bytes: 0, requests: 0, patches: 0, evicted: 0, errors: 0 };
+    this.stats = { bytes: 0, requests: 0, patches: 0, evicted: 0, errors: 0, bytesByLevel: [] };
     this.last = null;
     this.closed = false;
   }
@@ -86,7 +91,8 @@ export class Streamer {
       modelRadius: this.table.radius,
     };
     const view = makeView(camera, foveation);
-    const result = this.cut.run(view, this.resident, 0.002, this.probes);
+    const result = this.cut.run(view, this.resident, 0, this.probes, this.occluded);
+    this.viewKey = viewKey(camera, result.draw);
     this.cache.touch(result.draw);
     for (const node of this.cache.evict(this.cut.pinned)) {
       this.resident[node] = 0;
@@ -101,7 +107,42 @@ export class Streamer {
 
   /** Whether nothing more is wanted for the last camera (the cut reached its target). */
   settled() {
-    return !!this.last && this.last.requests.length === 0 && this.inFlight.size === 0;
+    return !!this.last && this.last.requests.length === 0 && this.inFlight.size === 0 && !this.visibilityStale();
+  }
+
+  /** Whether the last cut's camera or drawn set differ from what the last visibility pass saw. */
+  visibilityStale() {
+    return this.viewKey !== this.visibilityKey;
+  }
+
+  /**
+   * Records a visibility pass of the last cut: `seen` holds the drawn nodes that covered a
+   * sample. Nodes too small on screen to be sure of (`minRadiusPx`) count as shown. Returns
+   * whether any node's state changed (the cut should run again).
+   */
+  setVisibility(camera, seen, minRadiusPx) {
+    const draw = this.last ? this.last.draw : [];
+    const t = this.table;
+    const b = t.bounds;
+    const pixelScale = camera.height / (2 * Math.tan((camera.fovy * Math.PI) / 360));
+    const e = camera.eye;
+    const next = new Uint8Array(t.nodeCount);
+    for (const n of draw) {
+      if (seen.has(n)) continue;
+      const d = Math.hypot(b[n * 4] - e[0], b[n * 4 + 1] - e[1], b[n * 4 + 2] - e[2]);
+      const r = b[n * 4 + 3];
+      if (d > r && (r * pixelScale) / d >= minRadiusPx) next[n] = 1;
+    }
+    let changed = false;
+    for (let i = 0; i < next.length; i++) {
+      if (next[i] !== this.occluded[i]) {
+        changed = true;
+        break;
+      }
+    }
+    this.occluded = next;
+    this.visibilityKey = this.viewKey;
+    return changed;
   }
 
   schedule(requests) {
@@ -213,6 +254,12 @@ export class Streamer {
         buffers = run.map((node) => all.slice(t.offset[node] - first, t.offset[node] - first + t.length[node]));
       }
       this.stats.bytes += received;
+      const byLevel = this.stats.bytesByLevel;
+      for (const node of run) {
+        const level = t.level[node];
+        while (byLevel.length <= level) byLevel.push(0);
+        byLevel[level] += t.length[node];
+      }
       this.throughput.finish(performance.now(), received);
       received = -1;
       await Promise.all(run.map((node, k) => this.decoded(node, buffers[k])));
@@ -250,4 +297,11 @@ export class Streamer {
     this.closed = true;
     clearTimeout(this.paceTimer);
   }
+}
+
+/** Identity of a camera and drawn set (what a visibility pass depends on). */
+function viewKey(c, draw) {
+  let h = 0;
+  for (const n of draw) h = (Math.imul(h, 31) + n + 1) | 0;
+  return `${c.eye.join(',')};${c.target.join(',')};${c.up.join(',')};${c.fovy};${c.width}x${c.height};${draw.length};${h}`;
 }

@@ -19,6 +19,12 @@ import { linkedPart, parseCamera, writePart } from './url.js';
 import { SelectController } from '../select/controller.js';
 
 const CALLOUT_INTERVAL_MS = 120;
+/** Live events in a burst (a part, then its contents) refresh the page's parts list once. */
+const PART_LIST_DEBOUNCE_MS = 300;
+/** Visibility passes (streaming occlusion feedback) at most this often while the view changes. */
+const VISIBILITY_INTERVAL_MS = 150;
+/** Drawn patches smaller than this on screen (sphere radius, CSS px) never count as hidden. */
+const VISIBILITY_MIN_RADIUS_PX = 4;
 const CLICK_SLOP_PX = 5;
 const NEAR_PX = 12;
 
@@ -128,6 +134,7 @@ class Viewer {
       },
       highlightChanged: () => this.markAll(),
       partConfirmed: async (part) => {
+        this.refreshPartList();
         await this.store.reloadPart(part.id);
         // Highlighted, its information opens once the assign step is done.
         this.panel.close();
@@ -137,6 +144,7 @@ class Viewer {
         if (this.store.parts.has(id)) this.select(id, true);
       },
       contentsChanged: async (id) => {
+        this.refreshPartList();
         await this.store.reloadContents(id);
         if (this.panel.partId === id) this.panel.open(id, this.store);
       },
@@ -219,7 +227,23 @@ class Viewer {
       }
     }
     this.drawFoveae();
+    this.visibility(now);
     this.status();
+  }
+
+  /** Tells the streamer which drawn patches the frame shows no pixel of (throttled). */
+  visibility(now) {
+    if (!this.streamer.visibilityStale() || this.result.draw.length === 0) return;
+    const wait = (this.lastVisibility || 0) + VISIBILITY_INTERVAL_MS - now;
+    if (wait > 0) {
+      clearTimeout(this.visibilityTimer);
+      this.visibilityTimer = setTimeout(() => this.requestFrame(), wait);
+      return;
+    }
+    this.lastVisibility = now;
+    this.streamer.setVisibility(this.cameraState(), this.view.visibleNodes(), VISIBILITY_MIN_RADIUS_PX);
+    // A pass that changed nothing still settles the view: run the cut once more either way.
+    this.requestFrame();
   }
 
   /** Screen position (CSS px) and depth of a world point, or null behind the camera. */
@@ -353,11 +377,30 @@ class Viewer {
   }
 
   liveEvent(ev) {
+    this.refreshPartList();
     if (this.panel.isOpen() && this.panel.partId !== null) {
       const e = this.store.parts.get(this.panel.partId);
       const concerned = ev.part_id === this.panel.partId || (ev.content_id && e && e.contents.some((c) => c.id === ev.content_id));
       if (concerned) this.panel.open(this.panel.partId, this.store);
     }
+  }
+
+  /** Re-renders the page's server-side list of parts (below the viewer) after a change. */
+  refreshPartList() {
+    clearTimeout(this.partListTimer);
+    this.partListTimer = setTimeout(async () => {
+      const list = document.getElementById('model-parts');
+      if (!list) return;
+      try {
+        const res = await fetch(window.location.pathname, { credentials: 'same-origin' });
+        if (!res.ok) return;
+        const doc = new DOMParser().parseFromString(await res.text(), 'text/html');
+        const fresh = doc.getElementById('model-parts');
+        if (fresh) list.replaceWith(document.adoptNode(fresh));
+      } catch (e) {
+        console.warn('meshwiki viewer: parts list:', e.message || e);
+      }
+    }, PART_LIST_DEBOUNCE_MS);
   }
 
   // --- pointer ----------------------------------------------------------------------------

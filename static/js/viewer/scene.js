@@ -53,6 +53,20 @@ void main() {
   gl_FragColor = vec4(clamp(rgb, 0.0, 1.0), 1.0);
 }`;
 
+// Visibility pass: every drawn patch in a flat colour encoding its node id + 1, at a reduced
+// resolution, so the streamer knows which drawn patches no pixel of the frame shows.
+const ID_VERTEX = /* glsl */ `
+void main() {
+  gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
+}`;
+const ID_FRAGMENT = /* glsl */ `
+uniform vec3 uId;
+void main() {
+  gl_FragColor = vec4(uId, 1.0);
+}`;
+/** The visibility pass renders at 1/VISIBILITY_DOWNSCALE of the canvas in each direction. */
+export const VISIBILITY_DOWNSCALE = 2;
+
 export class SceneView {
   /**
    * @param {HTMLElement} container
@@ -83,6 +97,14 @@ export class SceneView {
         uSelectTint: { value: new THREE.Vector4(...SELECT_TINT) },
       },
     });
+    this.idMaterial = new THREE.ShaderMaterial({
+      vertexShader: ID_VERTEX,
+      fragmentShader: ID_FRAGMENT,
+      side: THREE.DoubleSide,
+      uniforms: { uId: { value: new THREE.Vector3() } },
+    });
+    this.visTarget = null;
+    this.visPixels = null;
     this.outline = new OutlinePass(this.renderer);
     this.meshes = new Map();
     this.drawn = [];
@@ -121,6 +143,12 @@ export class SceneView {
     mesh.matrixAutoUpdate = false;
     mesh.visible = false;
     mesh.userData = { node, ids: patch.ids, vertexCount: patch.vertexCount };
+    const id = node + 1;
+    mesh.onBeforeRender = (_r, _s, _c, _g, material) => {
+      if (material !== this.idMaterial) return;
+      material.uniforms.uId.value.set(((id >> 16) & 255) / 255, ((id >> 8) & 255) / 255, (id & 255) / 255);
+      material.uniformsNeedUpdate = true;
+    };
     this.scene.add(mesh);
     this.meshes.set(node, mesh);
     return mesh;
@@ -184,9 +212,44 @@ export class SceneView {
     if (outline) this.outline.render(this.scene, this.camera, outline);
   }
 
+  /**
+   * Renders the drawn patches as ids at reduced resolution (same camera and clip planes as the
+   * last frame) and returns the set of nodes that cover at least one sample.
+   */
+  visibleNodes() {
+    const w = Math.max(1, Math.round(this.width / VISIBILITY_DOWNSCALE));
+    const h = Math.max(1, Math.round(this.height / VISIBILITY_DOWNSCALE));
+    if (!this.visTarget || this.visTarget.width !== w || this.visTarget.height !== h) {
+      if (this.visTarget) this.visTarget.dispose();
+      this.visTarget = new THREE.WebGLRenderTarget(w, h, { depthBuffer: true, type: THREE.UnsignedByteType });
+      this.visPixels = new Uint8Array(w * h * 4);
+    }
+    const clear = this.renderer.getClearColor(new THREE.Color());
+    const alpha = this.renderer.getClearAlpha();
+    this.renderer.setClearColor(0x000000, 1);
+    this.scene.overrideMaterial = this.idMaterial;
+    this.renderer.setRenderTarget(this.visTarget);
+    this.renderer.render(this.scene, this.camera);
+    this.renderer.readRenderTargetPixels(this.visTarget, 0, 0, w, h, this.visPixels);
+    this.renderer.setRenderTarget(null);
+    this.scene.overrideMaterial = null;
+    this.renderer.setClearColor(clear, alpha);
+    const seen = new Set();
+    const px = this.visPixels;
+    let last = -1;
+    for (let i = 0; i < px.length; i += 4) {
+      const id = (px[i] << 16) | (px[i + 1] << 8) | px[i + 2];
+      if (id !== last && id !== 0) seen.add(id - 1);
+      last = id;
+    }
+    return seen;
+  }
+
   dispose() {
     for (const node of [...this.meshes.keys()]) this.removePatch(node);
     this.material.dispose();
+    this.idMaterial.dispose();
+    if (this.visTarget) this.visTarget.dispose();
     this.outline.dispose();
     this.renderer.dispose();
     this.canvas.remove();
