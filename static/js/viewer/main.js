@@ -500,6 +500,7 @@ class Viewer {
       foveaError: r.foveaError,
       pending: r.pending,
       wanted: r.requests.length,
+      hiddenDrawn: r.draw.filter((n) => this.streamer.occluded[n]).length,
       inFlight: this.streamer.inFlight.size,
       settled: this.streamer.settled(),
       resident: this.streamer.cache.entries.size,
