@@ -238,6 +238,10 @@ struct Node {
     cone: [f32; 4],
     lod_sphere: Sphere,
     lod_error: f32,
+    /// Bound on the distance of the unquantised patch to the scan (the part of `lod_error`
+    /// that carries over to coarser levels; quantisation does not, as every level is
+    /// simplified from unquantised positions).
+    geometric_error: f32,
     producer: u32,
     parent_sphere: Sphere,
     parent_error: f32,
@@ -266,9 +270,17 @@ struct Stored {
     outline: PatchOutline,
 }
 
-/// What a group step returns: the group error and its stored products, or `None` when the
-/// group could not be simplified (its members move on unchanged).
-type GroupOutcome = Option<(f32, Vec<Stored>)>;
+/// What a group step returns: its errors and stored products, or `None` when the group could
+/// not be simplified (its members move on unchanged).
+type GroupOutcome = Option<(GroupErrors, Vec<Stored>)>;
+
+/// A group's error bounds: geometric (unquantised products to the scan) and as stored (what
+/// a decoded product may be from the scan).
+#[derive(Clone, Copy)]
+struct GroupErrors {
+    geometric: f32,
+    stored: f32,
+}
 
 /// A patch of the current level awaiting grouping.
 struct PoolItem {
@@ -425,7 +437,7 @@ impl<'a> Builder<'a> {
         s: &Stored,
         level: u32,
         lod_sphere: Sphere,
-        lod_error: f32,
+        errors: GroupErrors,
         producer: u32,
     ) -> u32 {
         let id = self.nodes.len() as u32;
@@ -441,7 +453,8 @@ impl<'a> Builder<'a> {
             bounds: s.bounds,
             cone: s.cone,
             lod_sphere,
-            lod_error,
+            lod_error: errors.stored,
+            geometric_error: errors.geometric,
             producer,
             parent_sphere: lod_sphere,
             parent_error: f32::INFINITY,
@@ -520,7 +533,12 @@ impl<'a> Builder<'a> {
         let mut pool = Vec::new();
         for r in results {
             for s in r? {
-                let node = self.push_node(&s, 0, s.bounds, 0.0, NO_GROUP);
+                // Leaves are the scan itself (on the grid: within `grid.max_error()` of it).
+                let exact = GroupErrors {
+                    geometric: 0.0,
+                    stored: 0.0,
+                };
+                let node = self.push_node(&s, 0, s.bounds, exact, NO_GROUP);
                 pool.push(PoolItem {
                     node,
                     outline: s.outline,
@@ -601,26 +619,31 @@ impl<'a> Builder<'a> {
                     let outcome = match simplify_group(&merged, &shared_outside, max) {
                         None => None,
                         Some(step) => {
-                            // Triangle inequality: products are within `distance` of the
-                            // members, which are within their own error of the scan; coarse
-                            // interior quantisation adds its own bound.
+                            // Triangle inequality: the unquantised products are within
+                            // `distance` of the unquantised members, which are within their
+                            // geometric error of the scan. Decoding adds the quantisation of
+                            // this node only: every vertex is within `max_error()` of its grid
+                            // point, and coarse interiors add their rounding at `shift`.
                             let member_error = members
                                 .iter()
-                                .map(|&m| this.nodes[pool_ref[m].node as usize].lod_error)
+                                .map(|&m| this.nodes[pool_ref[m].node as usize].geometric_error)
                                 .fold(0.0f32, f32::max);
-                            let error = member_error + step.distance;
-                            let shift = this.grid.shift_for_error(error);
-                            let error = if shift > 0 {
-                                error + this.grid.max_error_at(shift) as f32
-                            } else {
-                                error
+                            let geometric = member_error + step.distance;
+                            let shift = this.grid.shift_for_error(geometric);
+                            let mut quantisation = this.grid.max_error();
+                            if shift > 0 {
+                                quantisation += this.grid.max_error_at(shift);
+                            }
+                            let errors = GroupErrors {
+                                geometric,
+                                stored: (geometric as f64 + quantisation) as f32,
                             };
                             let stored = step
                                 .products
                                 .iter()
                                 .map(|p| this.store(p, shift))
                                 .collect::<io::Result<Vec<_>>>()?;
-                            Some((error, stored))
+                            Some((errors, stored))
                         }
                     };
                     this.progress.advance(1);
@@ -636,7 +659,8 @@ impl<'a> Builder<'a> {
                     members.iter().filter_map(|&m| items[m].take()).collect();
                 match result? {
                     None => next.extend(member_items),
-                    Some((error, products)) => {
+                    Some((errors, products)) => {
+                        let error = errors.stored;
                         progressed = true;
                         let member_nodes: Vec<u32> = member_items.iter().map(|i| i.node).collect();
                         let g = self.groups.len() as u32;
@@ -655,7 +679,7 @@ impl<'a> Builder<'a> {
                         }
                         let mut product_nodes = Vec::with_capacity(products.len());
                         for s in products {
-                            let node = self.push_node(&s, level + 1, sphere, error, g);
+                            let node = self.push_node(&s, level + 1, sphere, errors, g);
                             product_nodes.push(node);
                             next.push(PoolItem {
                                 node,

@@ -112,8 +112,12 @@ export class Cut {
    * when the group it is a member of is hidden; a group is hidden when all its visible
    * products are (coarsest first, so hiddenness flows down to the patches under a hidden
    * one). A hidden group does not refine, so hidden surface is not streamed at full
-   * resolution; unless a finer group that does want refinement needs it, since a group
-   * refines only once all its products are in the cut (finest first, so that need is known).
+   * resolution.
+   *
+   * A group also wants refinement when a finer group that does needs it, since a group refines
+   * only once all its products are in the cut (finest first, so that need is known): a hidden
+   * neighbour, or a coarse group whose foveated threshold is larger than a descendant's
+   * (foveation.js), then never holds a wanted refinement back.
    */
   wanted(view, occluded) {
     const t = this.t;
@@ -142,9 +146,8 @@ export class Cut {
       const g = order[k];
       const r = projectedError(view, t.groupError[g], gs[g * 4], gs[g * 4 + 1], gs[g * 4 + 2], gs[g * 4 + 3]) / thresholdAt(fov, this.groupFoveaDistance(g, fov));
       ratio[g] = r;
-      let want = r > 1;
-      if (want && hidden[g]) {
-        want = false;
+      let want = r > 1 && !hidden[g];
+      if (!want) {
         for (const m of t.members[g]) {
           const producer = t.producer[m];
           if (producer >= 0 && demand[producer]) want = true;

@@ -18,9 +18,8 @@
 // patches, members and products (their tight bounding spheres). Group error spheres contain
 // all their descendants and are large, so the distance to them would be zero for most of the
 // model; the patches' tight bounds put the fovea's own patches at the target and the rest
-// further out. A coarse
-// group may then want less refinement than one of its descendants; the cut is decided
-// coarsest first, so that descendant simply waits (never a hole).
+// further out. A coarse group may then want less refinement than one of its descendants;
+// the cut then refines the coarse group too, as the descendant needs it (cut.js `wanted`).
 
 /** Default distortion α and cap r_max (fractions of the model radius). */
 export const DEFAULT_ALPHA = 20;
