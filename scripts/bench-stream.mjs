@@ -2,7 +2,8 @@
 // scan served by the real server, on an emulated network link, and prints time to first image,
 // time to 1 px quality, bytes transferred in total and per view, then the same path with a
 // fovea set on the close-up's surface point, against the size of the full-resolution model.
-// Figures are printed, never asserted. Usage: scripts/bench-stream [--mesh FILE] [--mbps N]
+// Figures are printed, never asserted.
+// Usage: scripts/bench-stream [--mesh FILE] [--mbps N] [--latency MS] [--view-timeout S]
 
 import { statSync, existsSync } from 'node:fs';
 import { join } from 'node:path';
@@ -19,7 +20,8 @@ const opt = (name, dflt) => {
 };
 const MBPS = Number(opt('mbps', '16'));
 const LATENCY_MS = Number(opt('latency', '20'));
-const VIEW_TIMEOUT = 180_000;
+// Software GL draws a few hundred thousand triangles per second: large scans need longer.
+const VIEW_TIMEOUT = Number(opt('view-timeout', '180')) * 1000;
 
 function pickMesh() {
   const given = opt('mesh', null);
