@@ -233,7 +233,12 @@ class Viewer {
 
   /** Tells the streamer which drawn patches the frame shows no pixel of (throttled). */
   visibility(now) {
-    if (!this.streamer.visibilityStale() || this.result.draw.length === 0) return;
+    if (!this.streamer.visibilityStale()) return;
+    if (this.result.draw.length === 0) {
+      // Nothing drawn, nothing to hide.
+      this.streamer.setVisibility(this.cameraState(), new Set(), VISIBILITY_MIN_RADIUS_PX);
+      return;
+    }
     const wait = (this.lastVisibility || 0) + VISIBILITY_INTERVAL_MS - now;
     if (wait > 0) {
       clearTimeout(this.visibilityTimer);
