@@ -17,7 +17,8 @@ use meshwiki_engine::render::{AdapterChoice, Frame, GpuDevice, Model, Renderer, 
 use meshwiki_engine::select::mask::{self, StrokeMask};
 use meshwiki_engine::select::modes::{self, Mode, VertexSet};
 use meshwiki_engine::select::{
-    BackProjectOptions, Buffers, EnergyParams, Tool, back_project, point, select_pixels,
+    BackProjectOptions, BackProjection, Buffers, EnergyParams, Tool, back_project, point,
+    select_pixels,
 };
 use roaring::RoaringBitmap;
 
@@ -148,6 +149,28 @@ fn rect(w: u32, h: u32, x0: u32, y0: u32, x1: u32, y1: u32) -> Vec<bool> {
 /// The front plane's outline in pixels, seen from `c`, and whether a ray from the eye to `p`
 /// crosses the front plane (with the distance in pixels from its crossing to the plane's
 /// edges).
+/// Runs `tool` on the strokes over a view's buffers and back-projects the selected pixels
+/// (default energy and options), relative to `base` when given.
+fn select_vertices(
+    p: &Planes,
+    c: &Camera,
+    buffers: &Buffers<'_>,
+    tool: Tool,
+    strokes: &StrokeMask,
+    base: Option<&RoaringBitmap>,
+) -> BackProjection {
+    let sel = select_pixels(tool, strokes, buffers, &EnergyParams::default(), false).unwrap();
+    back_project(
+        p.model.lod(),
+        c,
+        buffers,
+        &sel.selected,
+        base,
+        &BackProjectOptions::default(),
+    )
+    .unwrap()
+}
+
 fn occlusion(c: &Camera, p: Vec3) -> (bool, f32) {
     let eye = c.eye;
     let t = (FRONT_Z - eye.z) / (p.z - eye.z);
@@ -266,23 +289,7 @@ fn heavy_lasso_around_the_front_plane_selects_it_and_nothing_behind() {
             }
         }
     }
-    let sel = select_pixels(
-        Tool::HeavyLasso,
-        &m,
-        &buffers,
-        &EnergyParams::default(),
-        false,
-    )
-    .unwrap();
-    let bp = back_project(
-        p.model.lod(),
-        &c,
-        &buffers,
-        &sel.selected,
-        None,
-        &BackProjectOptions::default(),
-    )
-    .unwrap();
+    let bp = select_vertices(p, &c, &buffers, Tool::HeavyLasso, &m, None);
     let back: Vec<u32> = bp
         .vertices
         .iter()
@@ -335,16 +342,7 @@ fn markup_and_modes_across_two_views() {
         m.labels[(y * 320 + 85) as usize] = mask::BACKGROUND;
         m.labels[(y * 320 + 235) as usize] = mask::BACKGROUND;
     }
-    let sel = select_pixels(Tool::Markup, &m, &buffers, &EnergyParams::default(), false).unwrap();
-    let bp = back_project(
-        p.model.lod(),
-        &c,
-        &buffers,
-        &sel.selected,
-        None,
-        &Default::default(),
-    )
-    .unwrap();
+    let bp = select_vertices(p, &c, &buffers, Tool::Markup, &m, None);
     let front: RoaringBitmap = (p.back_vertices..p.mesh.positions.len() as u32).collect();
     let found = bp.vertices.intersection_len(&front);
     // The whole front plane, its outline (silhouette vertices) included.
@@ -373,16 +371,7 @@ fn markup_and_modes_across_two_views() {
             .collect(),
     )
     .unwrap();
-    let left = select_pixels(Tool::Lasso, &lasso, &b2, &EnergyParams::default(), false).unwrap();
-    let bp2 = back_project(
-        p.model.lod(),
-        &c2,
-        &b2,
-        &left.selected,
-        Some(&base.vertices),
-        &Default::default(),
-    )
-    .unwrap();
+    let bp2 = select_vertices(p, &c2, &b2, Tool::Lasso, &lasso, Some(&base.vertices));
     let trimmed = modes::combine(&base, &bp2, Mode::Subtract);
     assert!(trimmed.vertices.len() < base.vertices.len());
     assert!(trimmed.vertices.is_subset(&base.vertices));

@@ -13,13 +13,16 @@ pub async fn run(args: ServerArgs) -> anyhow::Result<()> {
     serve(state).await
 }
 
+/// What `serve` prints before each bound address (scripts and tests wait for it).
+pub const LISTENING: &str = "meshwiki listening on ";
+
 /// Serves an opened state, printing `meshwiki listening on http://ADDR` once bound.
 pub async fn serve(state: AppState) -> anyhow::Result<()> {
     let bind = state.settings.bind.clone();
     web::run(state, |addrs| {
         let mut out = std::io::stdout().lock();
         for a in addrs {
-            let _ = writeln!(out, "meshwiki listening on http://{a}");
+            let _ = writeln!(out, "{LISTENING}http://{a}");
         }
         let _ = out.flush();
     })

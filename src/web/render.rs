@@ -795,15 +795,7 @@ async fn callouts_json(
     let (result, _hold) = p
         .service
         .run(ticket, move |r| -> Result<_, RenderServiceError> {
-            let options = RenderOptions {
-                cut: Cut::View {
-                    pixel_error: params.px,
-                    culling: Culling::ALL,
-                },
-                outputs: params.outputs,
-                ..RenderOptions::default()
-            };
-            let frame = r.render(&model, &camera, &options, &[])?;
+            let frame = render_view(r, &model, &camera, &params, &[])?;
             let opts = LayoutOptions::for_height(camera.height);
             let layout = callouts::layout(&labels, &camera, frame.depth.as_deref(), &opts)
                 .map_err(|e| RenderServiceError::Invalid(e.to_string()))?;

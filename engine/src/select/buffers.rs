@@ -119,6 +119,17 @@ impl OwnedBuffers {
         }
     }
 
+    /// [`OwnedBuffers::flat`] with a crease: pixels from column `crease_x` on face 37° away.
+    pub fn creased(width: u32, height: u32, crease_x: u32) -> OwnedBuffers {
+        let mut b = OwnedBuffers::flat(width, height);
+        for (i, n) in b.normal.iter_mut().enumerate() {
+            if i % width as usize >= crease_x as usize {
+                *n = [0.6, 0.0, 0.8];
+            }
+        }
+        b
+    }
+
     /// Borrows them.
     pub fn view(&self) -> Buffers<'_> {
         Buffers {

@@ -258,12 +258,7 @@ mod tests {
     #[test]
     fn normal_creases_split_without_colour() {
         let (w, h) = (40u32, 20u32);
-        let mut b = OwnedBuffers::flat(w, h);
-        for i in 0..(w * h) as usize {
-            if i % w as usize >= 15 {
-                b.normal[i] = [0.6, 0.0, 0.8];
-            }
-        }
+        let b = OwnedBuffers::creased(w, h, 15);
         let v = b.view();
         let s = seeds::markup(&strokes(w, h), &v).unwrap();
         // Colour is ignored (no colour cue), the normal edge decides.

@@ -257,7 +257,7 @@ pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectE
 }
 
 /// Pixels not in `wall` that are 4-connected to the image border (a flood fill).
-fn outside_of(wall: &[bool], width: usize, height: usize) -> Vec<bool> {
+pub fn outside_of(wall: &[bool], width: usize, height: usize) -> Vec<bool> {
     let mut out = vec![false; wall.len()];
     let mut stack: Vec<usize> = Vec::new();
     let push = |i: usize, out: &mut Vec<bool>, stack: &mut Vec<usize>| {
@@ -553,12 +553,7 @@ mod tests {
     #[test]
     fn stroke_distance_is_long_across_a_crease() {
         let (w, h) = (40u32, 10u32);
-        let mut b = OwnedBuffers::flat(w, h);
-        for i in 0..(w * h) as usize {
-            if i % w as usize >= 10 {
-                b.normal[i] = [0.6, 0.0, 0.8];
-            }
-        }
+        let b = OwnedBuffers::creased(w, h, 10);
         let v = b.view();
         let mut m = StrokeMask::empty(w, h).unwrap();
         for y in 1..h - 1 {

@@ -2,6 +2,8 @@
 //! transforms (Felzenszwalb & Huttenlocher, "Distance Transforms of Sampled Functions", 2012),
 //! signed distance to an outline, connected components and hole filling.
 
+use meshwiki_engine::select::seeds::outside_of;
+
 /// One-dimensional squared distance transform (Felzenszwalb & Huttenlocher 2012): the lower
 /// envelope of the parabolas rooted at the finite samples of `f`.
 fn edt_1d(f: &[f64], out: &mut [f64], v: &mut [usize], z: &mut [f64]) {
@@ -126,40 +128,10 @@ pub fn components(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, Vec<usize>) {
     (label, sizes)
 }
 
-/// Pixels not in `region` that the image border cannot reach (4-connected): its holes.
+/// `region` with its holes filled: every pixel the image border cannot reach (4-connected)
+/// through pixels outside `region`.
 pub fn fill_holes(region: &[bool], w: usize, h: usize) -> Vec<bool> {
-    let mut reach = vec![false; region.len()];
-    let mut stack: Vec<usize> = Vec::new();
-    let push = |i: usize, reach: &mut Vec<bool>, stack: &mut Vec<usize>| {
-        if !region[i] && !reach[i] {
-            reach[i] = true;
-            stack.push(i);
-        }
-    };
-    for x in 0..w {
-        push(x, &mut reach, &mut stack);
-        push((h - 1) * w + x, &mut reach, &mut stack);
-    }
-    for y in 0..h {
-        push(y * w, &mut reach, &mut stack);
-        push(y * w + w - 1, &mut reach, &mut stack);
-    }
-    while let Some(i) = stack.pop() {
-        let (x, y) = (i % w, i / w);
-        if x > 0 {
-            push(i - 1, &mut reach, &mut stack);
-        }
-        if x + 1 < w {
-            push(i + 1, &mut reach, &mut stack);
-        }
-        if y > 0 {
-            push(i - w, &mut reach, &mut stack);
-        }
-        if y + 1 < h {
-            push(i + w, &mut reach, &mut stack);
-        }
-    }
-    reach.iter().map(|&r| !r).collect()
+    outside_of(region, w, h).iter().map(|&r| !r).collect()
 }
 
 /// The components of `mask` holding at least `keep` pixels of `count`.

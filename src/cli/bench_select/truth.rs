@@ -9,6 +9,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
+use meshwiki_engine::render::best_view::PartGeometry;
 use roaring::RoaringBitmap;
 
 /// A triangle mesh of the benchmark, as its OFF file has it.
@@ -166,20 +167,15 @@ pub fn segment(mesh: &Mesh, labels: &[u32], min_share: f64) -> Segmentation {
             tiny += 1;
             continue;
         }
-        let n = vertices.len() as f64;
-        let sum = vertices.iter().fold([0f64; 3], |s, v| {
-            let p = mesh.positions[v as usize];
-            [s[0] + p.x as f64, s[1] + p.y as f64, s[2] + p.z as f64]
-        });
-        let center = Vec3::new(
-            (sum[0] / n) as f32,
-            (sum[1] / n) as f32,
-            (sum[2] / n) as f32,
-        );
-        let extent = vertices
+        let points: Vec<[f32; 3]> = vertices
             .iter()
-            .map(|v| mesh.positions[v as usize].distance(center))
-            .fold(0.0, f32::max);
+            .map(|v| mesh.positions[v as usize].to_array())
+            .collect();
+        // Centre and extent as parts get them; the normal is the segment's area-weighted one.
+        let Some(PartGeometry { center, extent, .. }) = PartGeometry::from_points(&points, &[])
+        else {
+            continue;
+        };
         regions.push(Region {
             segment,
             shared: &vertices & &shared,

@@ -117,8 +117,7 @@ export class Streamer {
 
   /**
    * Records a visibility pass of the last cut: `seen` holds the drawn nodes that covered a
-   * sample. Nodes too small on screen to be sure of (`minRadiusPx`) count as shown. Returns
-   * whether any node's state changed (the cut should run again).
+   * sample. Nodes too small on screen to be sure of (`minRadiusPx`) count as shown.
    */
   setVisibility(camera, seen, minRadiusPx) {
     const draw = this.last ? this.last.draw : [];
@@ -133,16 +132,8 @@ export class Streamer {
       const r = b[n * 4 + 3];
       if (d > r && (r * pixelScale) / d >= minRadiusPx) next[n] = 1;
     }
-    let changed = false;
-    for (let i = 0; i < next.length; i++) {
-      if (next[i] !== this.occluded[i]) {
-        changed = true;
-        break;
-      }
-    }
     this.occluded = next;
     this.visibilityKey = this.viewKey;
-    return changed;
   }
 
   schedule(requests) {
