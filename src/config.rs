@@ -125,6 +125,10 @@ pub struct Settings {
     pub cookie_secure: bool,
     /// Number of HTTP worker threads (0: one per core).
     pub workers: usize,
+    /// Reverse proxies trusted to name the client in `X-Forwarded-For`.
+    pub trusted_proxies: Vec<std::net::IpAddr>,
+    /// How often `uploads/` is swept for files of interrupted uploads.
+    pub upload_sweep: std::time::Duration,
     /// Limits.
     pub limits: Limits,
     /// Background builds.
@@ -141,6 +145,8 @@ impl Settings {
             bind: DEFAULT_BIND.to_string(),
             cookie_secure: false,
             workers: 0,
+            trusted_proxies: Vec::new(),
+            upload_sweep: crate::uploads::SWEEP_EVERY,
             limits: Limits::default(),
             build: BuildSettings::default(),
             render: RenderSettings::default(),

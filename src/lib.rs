@@ -11,6 +11,8 @@ pub mod render;
 pub mod search;
 pub mod seed;
 pub mod store;
+pub mod throttle;
+pub mod uploads;
 pub mod web;
 pub mod wiki;
 

@@ -285,9 +285,11 @@ fn check_scan(name: &str, per_side: usize) {
         .chunks(3)
         .map(|t| [t[0], t[1], t[2]])
         .collect();
-    let in_b = boundary(&mut input_tris.into_iter());
+    let in_b = boundary(&mut input_tris.clone().into_iter());
+    let input_defects = Defects::of(&input_tris);
     let mut thresholds = vec![0.0f32];
     thresholds.extend(errors.iter().map(|e| e * 1.0001));
+    let mut worst = (0usize, 0usize);
     for e in thresholds {
         let cut = lod::cut_uniform(file.nodes(), e);
         let mut welded = Vec::new();
@@ -297,6 +299,37 @@ fn check_scan(name: &str, per_side: usize) {
                 welded.push([t[0], t[1], t[2]].map(|i| p.original_ids[i as usize]));
             }
         }
+        // Sound output: no non-manifold edge or duplicate triangle the scan lacks.
+        let d = Defects::of(&welded);
+        let new_edges: Vec<_> = d
+            .non_manifold
+            .iter()
+            .filter(|x| input_defects.non_manifold.binary_search(x).is_err())
+            .take(8)
+            .collect();
+        let new_dups: Vec<_> = d
+            .duplicates
+            .iter()
+            .filter(|x| input_defects.duplicates.binary_search(x).is_err())
+            .take(8)
+            .collect();
+        let n_edges = d
+            .non_manifold
+            .iter()
+            .filter(|x| input_defects.non_manifold.binary_search(x).is_err())
+            .count();
+        let n_dups = d
+            .duplicates
+            .iter()
+            .filter(|x| input_defects.duplicates.binary_search(x).is_err())
+            .count();
+        worst = (worst.0.max(n_edges), worst.1.max(n_dups));
+        assert!(
+            new_edges.is_empty() && new_dups.is_empty(),
+            "{name}: cut at {e} ({} triangles) has {n_edges} non-manifold edges and {n_dups} \
+             duplicate triangles the scan lacks: {new_edges:?} {new_dups:?}",
+            welded.len()
+        );
         let cut_b = boundary(&mut welded.into_iter());
         let extra: Vec<_> = cut_b
             .iter()
@@ -315,7 +348,56 @@ fn check_scan(name: &str, per_side: usize) {
             in_b.len()
         );
     }
+    println!(
+        "{name}: every cut: 0 non-manifold edges and 0 duplicate triangles beyond the scan's \
+         ({} and {})",
+        input_defects.non_manifold.len(),
+        input_defects.duplicates.len()
+    );
+    let _ = worst;
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Edges used by more than two triangles and triangles repeated (same three vertices, either
+/// orientation), by original id, sorted: written here, independently of the builder.
+struct Defects {
+    non_manifold: Vec<(u32, u32)>,
+    duplicates: Vec<[u32; 3]>,
+}
+
+impl Defects {
+    fn of(tris: &[[u32; 3]]) -> Defects {
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut seen: HashMap<[u32; 3], u32> = HashMap::new();
+        for t in tris {
+            if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+                continue;
+            }
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+            }
+            let mut key = *t;
+            key.sort_unstable();
+            *seen.entry(key).or_default() += 1;
+        }
+        let mut non_manifold: Vec<(u32, u32)> = edges
+            .into_iter()
+            .filter(|&(_, c)| c > 2)
+            .map(|(e, _)| e)
+            .collect();
+        non_manifold.sort_unstable();
+        let mut duplicates: Vec<[u32; 3]> = seen
+            .into_iter()
+            .filter(|&(_, c)| c > 1)
+            .map(|(t, _)| t)
+            .collect();
+        duplicates.sort_unstable();
+        Defects {
+            non_manifold,
+            duplicates,
+        }
+    }
 }
 
 fn input_mesh_ok(m: &Mesh) -> bool {
@@ -335,6 +417,29 @@ fn igea_closed_scan() {
 #[test]
 fn dragon_with_holes_and_many_components() {
     check_scan("stanford_dragon_vrip_871k.ply", 150_000);
+}
+
+#[test]
+fn laurana_with_colour() {
+    check_scan("laurana_bust_50k_vcolor.ply", 100_000);
+}
+
+#[test]
+fn nefertiti() {
+    check_scan("nefertiti_100k.ply", 100_000);
+}
+
+#[test]
+fn armadillo() {
+    check_scan("stanford_armadillo_346k.ply", 150_000);
+}
+
+#[test]
+fn textured_mask() {
+    check_scan(
+        "mask_bali_100k_textured_gltf/mask-gltf-2.0_separated-valid.gltf",
+        100_000,
+    );
 }
 
 #[test]

@@ -12,6 +12,7 @@ pub mod export_cut;
 pub mod import;
 pub mod lod;
 pub mod reindex;
+pub mod render_check;
 pub mod serve;
 pub mod untar;
 pub mod user;
@@ -54,6 +55,8 @@ pub enum Command {
     /// Developer tools for `.mwlod` files (build one from a scan, dump it as JSON).
     #[command(subcommand)]
     Lod(lod::LodCommand),
+    /// The renderer's self-test: open the adapter, render a generated relief, check the image.
+    RenderCheck(render_check::Args),
 }
 
 /// `user` subcommands.
@@ -121,6 +124,18 @@ pub struct ServerArgs {
     /// Session lifetime in hours.
     #[arg(long, env = "MESHWIKI_SESSION_HOURS", default_value_t = 336)]
     pub session_hours: i64,
+    /// Addresses of reverse proxies whose `X-Forwarded-For` names the client (comma-separated;
+    /// without one, the connection's peer address is the client, whatever headers say).
+    #[arg(long, env = "MESHWIKI_TRUSTED_PROXIES", value_delimiter = ',')]
+    pub trusted_proxies: Vec<std::net::IpAddr>,
+    /// Seconds between sweeps of `uploads/` for files of interrupted uploads.
+    #[arg(
+        long,
+        env = "MESHWIKI_UPLOAD_SWEEP_SECS",
+        default_value_t = 60,
+        hide = true
+    )]
+    pub upload_sweep_secs: u64,
     /// Largest model (scan) upload, in MiB.
     #[arg(long, env = "MESHWIKI_MAX_MODEL_UPLOAD_MB", default_value_t = 65536)]
     pub max_model_upload_mb: u64,
@@ -193,6 +208,8 @@ impl ServerArgs {
         s.limits.upload_bytes = self.max_upload_mb.max(1) * 1024 * 1024;
         s.limits.json_body = self.max_json_kb.max(16) * 1024;
         s.limits.session_ttl_secs = self.session_hours.clamp(1, 24 * 365) * 3600;
+        s.trusted_proxies = self.trusted_proxies.clone();
+        s.upload_sweep = std::time::Duration::from_secs(self.upload_sweep_secs.clamp(1, 86_400));
         s.build.upload_bytes = self.max_model_upload_mb.max(1).saturating_mul(1024 * 1024);
         s.build.workers = self.build_workers.clamp(1, 64);
         s.build.memory_budget = self.build_memory.max(64 << 20);
@@ -224,5 +241,8 @@ pub async fn run(cli: Cli) -> anyhow::Result<()> {
             tokio::task::spawn_blocking(move || bench_select::run(args)).await?
         }
         Command::Lod(command) => lod::run(command),
+        Command::RenderCheck(args) => {
+            tokio::task::spawn_blocking(move || render_check::run(&args)).await?
+        }
     }
 }

@@ -50,8 +50,6 @@ const TICK: Duration = Duration::from_millis(400);
 const IDLE_POLL: Duration = Duration::from_secs(5);
 /// How long shutdown waits for running builds to stop.
 const SHUTDOWN_WAIT: Duration = Duration::from_secs(30);
-/// Temporary files in `uploads/` older than this are leftovers at start-up.
-const STALE_TMP: Duration = Duration::from_secs(60);
 
 /// Errors of the job runner.
 #[derive(Debug, thiserror::Error)]
@@ -136,6 +134,8 @@ struct Inner {
     settings: Arc<Settings>,
     search: Option<SearchIndex>,
     wake: Notify,
+    /// Wakes the upload sweeper early (shutdown).
+    wake_sweeper: Notify,
     running: Mutex<HashMap<i64, Arc<JobProgress>>>,
     shutdown: AtomicBool,
     workers: Mutex<Vec<tokio::task::JoinHandle<()>>>,
@@ -340,8 +340,8 @@ fn plain_relative(rel: &str) -> Option<&Path> {
 /// A received upload: a complete file in `uploads/` under a temporary name.
 #[derive(Debug)]
 pub struct ReceivedScan {
-    /// The temporary file (moved into place by [`Jobs::submit_upload`]).
-    pub temp_path: PathBuf,
+    /// The temporary file (moved into place by [`Jobs::submit_upload`], removed if dropped).
+    pub temp: crate::uploads::TempUpload,
     /// Its size.
     pub bytes: u64,
     /// Lower-case extension (checked with [`scan_extension`]).
@@ -360,6 +360,7 @@ impl Jobs {
                 settings,
                 search,
                 wake: Notify::new(),
+                wake_sweeper: Notify::new(),
                 running: Mutex::new(HashMap::new()),
                 shutdown: AtomicBool::new(false),
                 workers: Mutex::new(Vec::new()),
@@ -405,6 +406,8 @@ impl Jobs {
             let me = self.clone();
             workers.push(tokio::spawn(async move { me.worker(k).await }));
         }
+        let me = self.clone();
+        workers.push(tokio::spawn(async move { me.sweeper().await }));
         Ok(recovered)
     }
 
@@ -420,10 +423,33 @@ impl Jobs {
             p.cancel();
         }
         self.inner.wake.notify_waiters();
+        self.inner.wake_sweeper.notify_waiters();
         let handles: Vec<_> = lock(&self.inner.workers).drain(..).collect();
         for h in handles {
             if tokio::time::timeout(SHUTDOWN_WAIT, h).await.is_err() {
                 tracing::warn!("a build did not stop within {SHUTDOWN_WAIT:?}");
+            }
+        }
+    }
+
+    /// Removes, every `settings.upload_sweep`, the temporary uploads of processes that
+    /// died while this one runs (another server or `meshwiki import` on the same data
+    /// directory), and any this process no longer holds.
+    async fn sweeper(&self) {
+        let dir = self.inner.settings.uploads_dir();
+        while !self.shutting_down() {
+            let every = self.inner.settings.upload_sweep;
+            let _ = tokio::time::timeout(every, self.inner.wake_sweeper.notified()).await;
+            if self.shutting_down() {
+                break;
+            }
+            let d = dir.clone();
+            let removed =
+                tokio::task::spawn_blocking(move || crate::uploads::sweep(&d, &process_alive))
+                    .await
+                    .unwrap_or_default();
+            for p in removed {
+                tracing::info!(path = %p.display(), "removed the temporary file of an interrupted upload");
             }
         }
     }
@@ -463,7 +489,10 @@ impl Jobs {
         let name = format!("src-{}.{}", crate::random_hex(12), scan.extension);
         let rel = format!("uploads/{name}");
         let dest = self.inner.settings.uploads_dir().join(&name);
-        tokio::fs::rename(&scan.temp_path, &dest).await?;
+        let (temp, to) = (scan.temp, dest.clone());
+        tokio::task::spawn_blocking(move || temp.persist(&to))
+            .await
+            .map_err(|e| JobError::Invalid(e.to_string()))??;
         let new = NewJob {
             kind: JobKind::Upload,
             source_path: Some(rel),
@@ -878,23 +907,20 @@ fn cleanup_dirs(
             }
         }
     }
+    // Temporary files of dead processes (or that no guard of this one holds), then queued
+    // inputs no job refers to.
+    let uploads = settings.uploads_dir();
+    removed.extend(crate::uploads::sweep(&uploads, &process_alive));
     let keep: std::collections::HashSet<&str> = sources
         .iter()
         .filter_map(|s| s.strip_prefix("uploads/"))
         .collect();
-    if let Ok(dir) = std::fs::read_dir(settings.uploads_dir()) {
+    if let Ok(dir) = std::fs::read_dir(&uploads) {
         for entry in dir.flatten() {
             let name = entry.file_name().to_string_lossy().into_owned();
             let path = entry.path();
-            let stale_tmp = name.ends_with(".tmp")
-                && entry
-                    .metadata()
-                    .and_then(|m| m.modified())
-                    .ok()
-                    .and_then(|t| t.elapsed().ok())
-                    .is_some_and(|age| age > STALE_TMP);
             let orphan = name.starts_with("src-") && !keep.contains(name.as_str());
-            if (stale_tmp || orphan) && entry.file_type().is_ok_and(|t| t.is_file()) {
+            if orphan && entry.file_type().is_ok_and(|t| t.is_file()) {
                 match std::fs::remove_file(&path) {
                     Ok(()) => removed.push(path),
                     Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove"),

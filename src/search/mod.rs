@@ -321,10 +321,7 @@ impl SearchIndex {
                 .unwrap_or_default() as i64;
             let title = text(f.title);
             let caption = text(f.caption);
-            let mut title_html = title_snippets.snippet_from_doc(&doc).to_html();
-            if title_html.is_empty() {
-                title_html = crate::wiki::diff::escape(&title);
-            }
+            let title_html = whole_highlighted(&title, &title_snippets.snippet(&title));
             let mut snippet_html = body_snippets.snippet_from_doc(&doc).to_html();
             if snippet_html.is_empty() {
                 let body = text(f.body);
@@ -445,4 +442,35 @@ fn open_index(dir: &Path) -> Result<(Index, Option<i64>), SearchError> {
     };
     index.tokenizers().register(TOKENIZER, analyzer());
     Ok((index, seq))
+}
+
+/// All of `text` as HTML, with the snippet's matches in `<b>`: a snippet's fragment ends at
+/// its last match ("Lion paw (<b>north</b>" for "Lion paw (north)"), which is right for a
+/// body excerpt but not for a title, which is shown whole.
+fn whole_highlighted(text: &str, snippet: &tantivy::snippet::Snippet) -> String {
+    use crate::wiki::diff::escape;
+    let base = snippet.fragment_range().start;
+    let mut ranges: Vec<std::ops::Range<usize>> = snippet
+        .highlighted()
+        .iter()
+        .map(|r| base + r.start..base + r.end)
+        .filter(|r| r.start < r.end && r.end <= text.len())
+        .filter(|r| text.is_char_boundary(r.start) && text.is_char_boundary(r.end))
+        .collect();
+    ranges.sort_by_key(|r| r.start);
+    let mut html = String::with_capacity(text.len() + 7 * ranges.len());
+    let mut at = 0;
+    for r in ranges {
+        if r.end <= at {
+            continue;
+        }
+        let start = r.start.max(at);
+        html.push_str(&escape(&text[at..start]));
+        html.push_str("<b>");
+        html.push_str(&escape(&text[start..r.end]));
+        html.push_str("</b>");
+        at = r.end;
+    }
+    html.push_str(&escape(&text[at..]));
+    html
 }

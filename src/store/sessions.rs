@@ -67,6 +67,29 @@ pub async fn create(db: &Db, user_id: i64, ttl_secs: i64) -> Result<NewSession> 
     })
 }
 
+/// Records a failed login in the audit log: the account when it exists (`user_id`), the name
+/// tried and the client address. The password is never recorded.
+pub async fn record_failed_login(
+    db: &Db,
+    user_id: Option<i64>,
+    username: &str,
+    address: &str,
+) -> Result<()> {
+    let mut tx = db.begin().await?;
+    let name: String = username.chars().take(64).collect();
+    super::audit::record(
+        &mut tx,
+        None,
+        "session.login_failed",
+        "user",
+        user_id,
+        serde_json::json!({ "username": name, "address": address }),
+    )
+    .await?;
+    tx.commit().await?;
+    Ok(())
+}
+
 /// The live session for a cookie token, if any (expired sessions and disabled users: none).
 pub async fn lookup(db: &Db, token: &str) -> Result<Option<Session>> {
     if token.len() != 64 {

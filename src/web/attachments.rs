@@ -5,18 +5,15 @@
 //! The uploader's file name is kept for display and the download's `Content-Disposition`
 //! only; it is never used as a path.
 
-use std::collections::HashMap;
-use std::path::PathBuf;
-
 use actix_multipart::Multipart;
 use actix_web::body::SizedStream;
 use actix_web::http::header;
 use actix_web::{HttpResponse, web};
 use futures_util::StreamExt;
-use sha2::Digest;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::AsyncReadExt;
 
 use super::auth::Auth;
+use super::multipart::{TextFields, multipart_error, spool};
 use super::{ApiError, AppState};
 use crate::store::attachments::{self, Attachment, NewAttachment};
 use crate::store::contents;
@@ -47,7 +44,7 @@ pub struct Received {
     /// What to record.
     pub attachment: NewAttachment,
     /// The other (text) fields of the form.
-    pub fields: HashMap<String, String>,
+    pub fields: TextFields,
 }
 
 /// Keeps only the last path component, drops control characters, caps the length.
@@ -96,20 +93,6 @@ pub fn clean_media_type(declared: Option<&str>, name: &str) -> String {
     }
 }
 
-fn multipart_error(e: actix_multipart::MultipartError) -> ApiError {
-    ApiError::bad(format!("invalid multipart upload: {e}"))
-}
-
-struct TempFile(Option<PathBuf>);
-
-impl Drop for TempFile {
-    fn drop(&mut self) {
-        if let Some(p) = self.0.take() {
-            let _ = std::fs::remove_file(p);
-        }
-    }
-}
-
 /// Reads a multipart form with one `file` field. With `csrf`, a `csrf_token` text field
 /// holding that value must come before the file (HTML forms); otherwise 403.
 pub async fn receive(
@@ -118,7 +101,7 @@ pub async fn receive(
     csrf: Option<&str>,
 ) -> Result<Received, ApiError> {
     let limit = state.settings.limits.upload_bytes;
-    let mut fields = HashMap::new();
+    let mut fields = TextFields::new();
     let mut received: Option<NewAttachment> = None;
     while let Some(field) = form.next().await {
         let mut field = field.map_err(multipart_error)?;
@@ -132,7 +115,7 @@ pub async fn receive(
                 return Err(ApiError::bad("upload exactly one file per request"));
             }
             if let Some(expected) = csrf {
-                let sent = fields.get("csrf_token").map(String::as_str).unwrap_or("");
+                let sent = fields.get("csrf_token").unwrap_or("");
                 if !super::auth::constant_time_eq(sent, expected) {
                     return Err(ApiError::Forbidden(
                         "missing or invalid CSRF token: reload the page and try again".into(),
@@ -144,50 +127,27 @@ pub async fn receive(
                 field.content_type().map(|m| m.essence_str()),
                 &original_name,
             );
-            let tmp_path = state
-                .settings
-                .uploads_dir()
-                .join(format!("{}.tmp", crate::random_hex(16)));
-            let mut guard = TempFile(Some(tmp_path.clone()));
-            let mut file = tokio::fs::File::create(&tmp_path).await?;
-            let mut hasher = sha2::Sha256::new();
-            let mut size: u64 = 0;
-            while let Some(chunk) = field.next().await {
-                let chunk = chunk.map_err(multipart_error)?;
-                size += chunk.len() as u64;
-                if size > limit {
-                    return Err(ApiError::PayloadTooLarge(format!(
-                        "attachment larger than the limit of {limit} bytes"
-                    )));
-                }
-                hasher.update(&chunk);
-                file.write_all(&chunk).await?;
-            }
-            file.sync_all().await?;
-            drop(file);
-            let sha256 = crate::hex(&hasher.finalize());
+            let stream = (&mut field).map(|c| c.map_err(multipart_error));
+            let spooled = spool(&state.settings.uploads_dir(), stream, limit, true, || {
+                ApiError::PayloadTooLarge(format!(
+                    "attachment larger than the limit of {limit} bytes"
+                ))
+            })
+            .await?;
+            let sha256 = spooled.sha256.unwrap_or_default();
             let settings = state.settings.clone();
-            let (tmp, sha) = (tmp_path.clone(), sha256.clone());
-            tokio::task::spawn_blocking(move || crate::blobs::commit_temp(&settings, &tmp, &sha))
+            let (tmp, sha) = (spooled.temp, sha256.clone());
+            tokio::task::spawn_blocking(move || crate::blobs::commit_temp(&settings, tmp, &sha))
                 .await
                 .map_err(ApiError::internal)??;
-            guard.0 = None;
             received = Some(NewAttachment {
                 sha256,
                 media_type,
-                size: size as i64,
+                size: spooled.bytes as i64,
                 original_name,
             });
         } else {
-            let mut value = Vec::new();
-            while let Some(chunk) = field.next().await {
-                let chunk = chunk.map_err(multipart_error)?;
-                value.extend_from_slice(&chunk);
-                if value.len() > 4096 {
-                    return Err(ApiError::bad(format!("form field {name:?} too long")));
-                }
-            }
-            fields.insert(name, String::from_utf8_lossy(&value).into_owned());
+            fields.read(name, &mut field, 4096).await?;
         }
     }
     let attachment = received.ok_or_else(|| ApiError::bad("no file field in the upload"))?;
@@ -201,7 +161,7 @@ async fn upload(
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Editor)?;
     let r = receive(&state, form, None).await?;
-    let content_id = match r.fields.get("content_id").map(|s| s.trim()) {
+    let content_id = match r.fields.get("content_id").map(str::trim) {
         None | Some("") => None,
         Some(s) => Some(
             s.parse::<i64>()

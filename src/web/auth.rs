@@ -8,6 +8,7 @@
 //!   `csrf_token` field must match the session's (else 403).
 
 use std::future::Future;
+use std::net::IpAddr;
 use std::pin::Pin;
 
 use actix_web::cookie::{Cookie, SameSite};
@@ -19,7 +20,7 @@ use serde::de::DeserializeOwned;
 use super::AppState;
 use super::error::{ApiError, PageError};
 use crate::store::sessions::{self, Session};
-use crate::store::users::{Role, User};
+use crate::store::users::{self, Role, User};
 
 /// Name of the session cookie.
 pub const SESSION_COOKIE: &str = "meshwiki_session";
@@ -94,6 +95,89 @@ pub fn check_origin(req: &HttpRequest) -> Result<(), ApiError> {
         Err(ApiError::Forbidden(format!(
             "cross-origin request from {origin} refused"
         )))
+    }
+}
+
+/// The client's address: the connection's peer or, when the peer is a trusted reverse proxy,
+/// the last address of `X-Forwarded-For` that is not itself a trusted proxy. Never a header
+/// from an untrusted peer (anyone can send one).
+pub fn client_addr(req: &HttpRequest, trusted: &[IpAddr]) -> IpAddr {
+    let peer = req
+        .peer_addr()
+        .map(|a| a.ip())
+        .unwrap_or(IpAddr::V6(std::net::Ipv6Addr::UNSPECIFIED));
+    if !trusted.contains(&peer) {
+        return peer;
+    }
+    let forwarded = req
+        .headers()
+        .get_all("x-forwarded-for")
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .filter_map(|a| a.trim().parse::<IpAddr>().ok())
+        .collect::<Vec<_>>();
+    forwarded
+        .into_iter()
+        .rev()
+        .find(|a| !trusted.contains(a))
+        .unwrap_or(peer)
+}
+
+/// One login attempt, for the API and the login form alike: refused with 429 while this
+/// account from this address (or this address) is backing off ([`crate::throttle`]), else the
+/// password is checked; every failure is logged, and every checked one audited.
+pub async fn attempt_login(
+    req: &HttpRequest,
+    state: &AppState,
+    username: &str,
+    password: &str,
+) -> Result<User, ApiError> {
+    let addr = client_addr(req, &state.settings.trusted_proxies);
+    let now = std::time::Instant::now();
+    let shown: String = username.chars().take(64).collect();
+    if let Err(left) = state.logins.check(username, addr, now) {
+        let secs = left.as_secs_f64().ceil().max(1.0) as u64;
+        // Logged, not audited: a refused attempt checks nothing, and one database write per
+        // refusal would let a flood of them load the writer.
+        tracing::warn!(user = %shown, %addr, retry_after = secs, "login refused: too many failures");
+        return Err(ApiError::TooManyRequests {
+            message: format!("too many failed logins: try again in {secs} s"),
+            retry_after: secs,
+        });
+    }
+    let user = if username.len() <= 256 && password.len() <= 4096 {
+        users::authenticate(&state.db, username, password).await?
+    } else {
+        None
+    };
+    match user {
+        Some(user) => {
+            state.logins.succeeded(username, addr);
+            Ok(user)
+        }
+        None => {
+            let f = state
+                .logins
+                .failed(username, addr, std::time::Instant::now());
+            tracing::warn!(
+                user = %shown,
+                %addr,
+                failures = f.pair_failures,
+                address_failures = f.address_failures,
+                blocked_secs = f.blocked_for.map(|d| d.as_secs()),
+                "failed login"
+            );
+            let account = match users::by_name(&state.db, username).await {
+                Ok(u) => u.map(|u| u.id),
+                Err(_) => None,
+            };
+            if let Err(e) =
+                sessions::record_failed_login(&state.db, account, &shown, &addr.to_string()).await
+            {
+                tracing::error!(error = %e, "cannot audit a failed login");
+            }
+            Err(ApiError::BadCredentials)
+        }
     }
 }
 

@@ -42,6 +42,13 @@ pub enum ApiError {
     PayloadTooLarge(String),
     /// 415: wrong content type.
     UnsupportedMediaType(String),
+    /// 429: too many attempts (failed logins); with `Retry-After`.
+    TooManyRequests {
+        /// Why.
+        message: String,
+        /// Seconds until an attempt is heard again.
+        retry_after: u64,
+    },
     /// 503: the service cannot answer now (render queue full, no GPU adapter); with
     /// `Retry-After` when retrying later may work.
     Unavailable {
@@ -78,6 +85,15 @@ impl ApiError {
         }
     }
 
+    /// Seconds for a `Retry-After` header, if the error has one.
+    pub fn retry_after(&self) -> Option<u64> {
+        match self {
+            ApiError::Unavailable { retry_after, .. } => *retry_after,
+            ApiError::TooManyRequests { retry_after, .. } => Some(*retry_after),
+            _ => None,
+        }
+    }
+
     /// The message shown to the client.
     pub fn message(&self) -> String {
         match self {
@@ -87,6 +103,7 @@ impl ApiError {
             | ApiError::Conflict(m)
             | ApiError::PayloadTooLarge(m)
             | ApiError::UnsupportedMediaType(m)
+            | ApiError::TooManyRequests { message: m, .. }
             | ApiError::Unavailable { message: m, .. } => m.clone(),
             ApiError::Unauthorized => "authentication required: log in first".into(),
             ApiError::BadCredentials => "invalid username or password".into(),
@@ -118,6 +135,7 @@ impl ResponseError for ApiError {
             ApiError::Conflict(_) | ApiError::StaleRevision { .. } => StatusCode::CONFLICT,
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::TooManyRequests { .. } => StatusCode::TOO_MANY_REQUESTS,
             ApiError::Unavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
@@ -138,11 +156,7 @@ impl ResponseError for ApiError {
         }
         let mut resp = HttpResponse::build(self.status_code());
         resp.insert_header((header::CACHE_CONTROL, "no-store"));
-        if let ApiError::Unavailable {
-            retry_after: Some(secs),
-            ..
-        } = self
-        {
+        if let Some(secs) = self.retry_after() {
             resp.insert_header((header::RETRY_AFTER, secs.to_string()));
         }
         if matches!(self, ApiError::Unauthorized) {
@@ -262,11 +276,13 @@ impl ResponseError for PageError {
                     reason: status.canonical_reason().unwrap_or("Error"),
                     message: e.message(),
                 };
+                let mut resp = HttpResponse::build(status);
+                if let Some(secs) = e.retry_after() {
+                    resp.insert_header((header::RETRY_AFTER, secs.to_string()));
+                }
                 match page.render() {
-                    Ok(html) => HttpResponse::build(status)
-                        .content_type(ContentType::html())
-                        .body(html),
-                    Err(_) => HttpResponse::build(status).body(e.message()),
+                    Ok(html) => resp.content_type(ContentType::html()).body(html),
+                    Err(_) => resp.body(e.message()),
                 }
             }
         }
@@ -278,9 +294,15 @@ pub fn login_url(next: &str) -> String {
     format!("/login?next={}", encode_component(safe_next(next)))
 }
 
-/// `next` if it is a local absolute path (no scheme, no `//host`), else `/`.
+/// `next` if it is a same-origin absolute path, else `/`.
+///
+/// Browsers drop tabs and newlines from URLs and read a backslash as `/`, so `/<TAB>/evil.example`
+/// or `/<BACKSLASH>evil.example` would become the scheme-relative `//evil.example`: only printable ASCII
+/// without spaces or backslashes passes, starting with one `/` (never `//`). Such a value is
+/// also always a valid `Location` header.
 pub fn safe_next(next: &str) -> &str {
-    if next.starts_with('/') && !next.starts_with("//") && !next.contains('\\') {
+    let printable = next.bytes().all(|b| b.is_ascii_graphic() && b != b'\\');
+    if printable && next.starts_with('/') && !next.starts_with("//") {
         next
     } else {
         "/"

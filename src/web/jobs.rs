@@ -9,8 +9,6 @@
 //! * `/admin/jobs` (admin): jobs with live progress, a multipart upload form and cancel
 //!   buttons, usable without JavaScript (the page refreshes itself while a job runs).
 
-use std::path::PathBuf;
-
 use actix_multipart::Multipart;
 use actix_web::ResponseError as _;
 use actix_web::http::{StatusCode, header};
@@ -19,9 +17,9 @@ use askama::Template;
 use futures_util::{Stream, StreamExt};
 use serde::Deserialize;
 use serde_json::json;
-use tokio::io::AsyncWriteExt;
 
 use super::auth::{Auth, PageAuth, PageForm};
+use super::multipart::{self, TextFields, multipart_error};
 use super::pages::{CsrfOnly, Layout, redirect, render_status};
 use super::{ApiError, AppState, PageError, PageQuery};
 use crate::jobs::{JobError, ReceivedScan, SCAN_EXTENSIONS, scan_extension};
@@ -51,17 +49,6 @@ impl From<JobError> for ApiError {
     }
 }
 
-/// Removes a partly received upload unless disarmed.
-struct TempUpload(Option<PathBuf>);
-
-impl Drop for TempUpload {
-    fn drop(&mut self) {
-        if let Some(p) = self.0.take() {
-            let _ = std::fs::remove_file(p);
-        }
-    }
-}
-
 fn too_large(limit: u64) -> ApiError {
     ApiError::PayloadTooLarge(format!(
         "model upload larger than the limit of {limit} bytes (--max-model-upload-mb)"
@@ -69,44 +56,24 @@ fn too_large(limit: u64) -> ApiError {
 }
 
 /// Streams `body` to a temporary file in `uploads/`, at most `limit` bytes.
-async fn receive_scan<S, E>(
+async fn receive_scan<S>(
     state: &AppState,
-    mut body: S,
+    body: S,
     extension: String,
     display_name: String,
     limit: u64,
 ) -> Result<ReceivedScan, ApiError>
 where
-    S: Stream<Item = Result<web::Bytes, E>> + Unpin,
-    E: std::fmt::Display,
+    S: Stream<Item = Result<web::Bytes, ApiError>> + Unpin,
 {
-    let path = state
-        .settings
-        .uploads_dir()
-        .join(format!("{}.tmp", crate::random_hex(16)));
-    let mut guard = TempUpload(Some(path.clone()));
-    let file = tokio::fs::File::create(&path).await?;
-    let mut out = tokio::io::BufWriter::with_capacity(1 << 20, file);
-    let mut bytes: u64 = 0;
-    while let Some(chunk) = body.next().await {
-        let chunk = chunk.map_err(|e| ApiError::bad(format!("upload interrupted: {e}")))?;
-        bytes += chunk.len() as u64;
-        if bytes > limit {
-            return Err(too_large(limit));
-        }
-        out.write_all(&chunk).await?;
-    }
-    if bytes == 0 {
+    let dir = state.settings.uploads_dir();
+    let spooled = multipart::spool(&dir, body, limit, false, || too_large(limit)).await?;
+    if spooled.bytes == 0 {
         return Err(ApiError::bad("the upload is empty"));
     }
-    out.flush().await?;
-    let file = out.into_inner();
-    file.sync_all().await?;
-    drop(file);
-    guard.0 = None;
     Ok(ReceivedScan {
-        temp_path: path,
-        bytes,
+        temp: spooled.temp,
+        bytes: spooled.bytes,
         extension,
         display_name,
     })
@@ -168,7 +135,8 @@ async fn upload(
         return Err(too_large(limit));
     }
     let display = super::attachments::sanitize_name(filename);
-    let scan = receive_scan(&state, payload, extension, display.clone(), limit).await?;
+    let body = payload.map(|c| c.map_err(|e| ApiError::bad(format!("upload interrupted: {e}"))));
+    let scan = receive_scan(&state, body, extension, display.clone(), limit).await?;
     let model = NewModel {
         title,
         description: q.description.replace("\r\n", "\n"),
@@ -296,10 +264,6 @@ async fn page(state: web::Data<AppState>, auth: PageAuth) -> Result<HttpResponse
     jobs_page(&state, &auth, StatusCode::OK, String::new()).await
 }
 
-fn multipart_error(e: actix_multipart::MultipartError) -> ApiError {
-    ApiError::bad(format!("invalid multipart upload: {e}"))
-}
-
 /// Reads the upload form: text fields (`csrf_token` first, `title`, `description`) and one
 /// `file`, streamed to `uploads/`.
 async fn receive_form(
@@ -308,7 +272,7 @@ async fn receive_form(
     mut form: Multipart,
 ) -> Result<(ReceivedScan, String, String), ApiError> {
     let limit = state.settings.build.upload_bytes;
-    let mut fields = std::collections::HashMap::new();
+    let mut fields = TextFields::new();
     let mut scan = None;
     while let Some(field) = form.next().await {
         let mut field = field.map_err(multipart_error)?;
@@ -321,7 +285,7 @@ async fn receive_form(
             if scan.is_some() {
                 return Err(ApiError::bad("upload exactly one file"));
             }
-            let sent = fields.get("csrf_token").map(String::as_str).unwrap_or("");
+            let sent = fields.get("csrf_token").unwrap_or("");
             if !super::auth::constant_time_eq(sent, auth.csrf()) {
                 return Err(ApiError::Forbidden(
                     "missing or invalid CSRF token: reload the page and try again".into(),
@@ -333,14 +297,7 @@ async fn receive_form(
             let stream = (&mut field).map(|c| c.map_err(multipart_error));
             scan = Some(receive_scan(state, Box::pin(stream), extension, display, limit).await?);
         } else {
-            let mut value = Vec::new();
-            while let Some(chunk) = field.next().await {
-                value.extend_from_slice(&chunk.map_err(multipart_error)?);
-                if value.len() > 64 * 1024 {
-                    return Err(ApiError::bad(format!("form field {name:?} too long")));
-                }
-            }
-            fields.insert(name, String::from_utf8_lossy(&value).into_owned());
+            fields.read(name, &mut field, 64 * 1024).await?;
         }
     }
     let scan = scan.ok_or_else(|| ApiError::bad("choose a scan file to upload"))?;
@@ -365,7 +322,7 @@ async fn page_upload(
     let title = match check_title(&title, state.settings.limits.title_chars) {
         Ok(t) => t,
         Err(e) => {
-            let _ = tokio::fs::remove_file(&scan.temp_path).await;
+            drop(scan);
             return jobs_page(&state, &auth, StatusCode::BAD_REQUEST, e.message()).await;
         }
     };

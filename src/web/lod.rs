@@ -1,6 +1,7 @@
 //! Serving a model's LOD hierarchy (`docs/FORMAT.md`, "HTTP"): the DAG as JSON or as the
 //! file's header and tables, one patch blob, or the whole file, with `ETag`, `If-None-Match`
-//! (304) and single byte ranges (206, 416). Anyone logged in reads.
+//! (304) and single byte ranges (206; 416 when unsatisfiable; a malformed or multiple range is
+//! ignored: 200). Anyone logged in reads.
 //!
 //! Open files live in a small registry ([`LodRegistry`]) keyed by model id and checked
 //! against the file on disk (device, inode, size, modification time) on every request, so a
@@ -340,26 +341,25 @@ pub struct ByteRange {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BadRange(pub String);
 
-/// Parses a `Range` header against a body of `len` bytes: `None` to serve the whole body
-/// (no header, or a unit other than bytes), a range, or why it is unsatisfiable (malformed,
-/// beyond the end, or several ranges, which this server does not combine).
+/// Parses a `Range` header against a body of `len` bytes (RFC 9110 §14.2): `None` to serve the
+/// whole body (no header; a unit other than bytes; a malformed header, or several ranges, which
+/// this server does not combine: the RFC lets a server ignore those), a range, or why a
+/// well-formed single range cannot be satisfied (it starts beyond the end; an empty suffix).
 pub fn parse_range(value: Option<&str>, len: u64) -> Result<Option<ByteRange>, BadRange> {
     let Some(v) = value else { return Ok(None) };
     let v = v.trim();
     let Some((unit, spec)) = v.split_once('=') else {
-        return Err(BadRange(format!("malformed Range header {v:?}")));
+        return Ok(None);
     };
     if !unit.trim().eq_ignore_ascii_case("bytes") {
         return Ok(None);
     }
     let spec = spec.trim();
     if spec.contains(',') {
-        return Err(BadRange(
-            "multiple byte ranges are not supported: request one range at a time".into(),
-        ));
+        return Ok(None);
     }
     let Some((a, b)) = spec.split_once('-') else {
-        return Err(BadRange(format!("malformed byte range {spec:?}")));
+        return Ok(None);
     };
     let (a, b) = (a.trim(), b.trim());
     let num = |s: &str| {
@@ -370,7 +370,7 @@ pub fn parse_range(value: Option<&str>, len: u64) -> Result<Option<ByteRange>, B
         }
     };
     let range = if a.is_empty() {
-        let n = num(b).ok_or_else(|| BadRange(format!("malformed byte range {spec:?}")))?;
+        let Some(n) = num(b) else { return Ok(None) };
         if n == 0 || len == 0 {
             return Err(BadRange(format!(
                 "range {spec:?} is empty or beyond the {len} bytes"
@@ -381,17 +381,15 @@ pub fn parse_range(value: Option<&str>, len: u64) -> Result<Option<ByteRange>, B
             end: len,
         }
     } else {
-        let start = num(a).ok_or_else(|| BadRange(format!("malformed byte range {spec:?}")))?;
+        let Some(start) = num(a) else { return Ok(None) };
         let end = if b.is_empty() {
             len
         } else {
-            let last = num(b).ok_or_else(|| BadRange(format!("malformed byte range {spec:?}")))?;
-            if last < start {
-                return Err(BadRange(format!(
-                    "byte range {spec:?} ends before it starts"
-                )));
+            match num(b) {
+                Some(last) if last >= start => last.saturating_add(1).min(len),
+                // Not a valid range-spec (a last position before the first, or no number).
+                _ => return Ok(None),
             }
-            last.saturating_add(1).min(len)
         };
         if start >= len {
             return Err(BadRange(format!(
@@ -593,18 +591,85 @@ mod tests {
         );
         assert_eq!(parse_range(None, 100), Ok(None));
         assert_eq!(r("items=0-1"), Ok(None));
-        for bad in [
-            "bytes=100-",
-            "bytes=200-300",
+        // Malformed or several ranges: ignored, the whole body is served.
+        for ignored in [
             "bytes=9-1",
             "bytes=a-b",
-            "bytes=-0",
+            "bytes=abc",
             "bytes=0-1,5-6",
             "bytes",
             "bytes=--1",
             "bytes=+1-2",
+            "bytes=1-x",
         ] {
+            assert_eq!(r(ignored), Ok(None), "{ignored}");
+        }
+        // Well-formed but unsatisfiable: 416.
+        for bad in ["bytes=100-", "bytes=200-300", "bytes=-0"] {
             assert!(r(bad).is_err(), "{bad}");
         }
+        assert!(parse_range(Some("bytes=-5"), 0).is_err());
+    }
+
+    /// Deterministic mutation of real `Range` headers (issue 14 §8): no panic, every range
+    /// served lies inside the body, and only well-formed single ranges are ever refused.
+    #[test]
+    fn mutated_ranges_stay_inside_the_body() {
+        let seeds = [
+            "bytes=0-9",
+            "bytes=4-13",
+            "bytes=-8",
+            "bytes=100-",
+            "bytes=0-1,4-5",
+        ];
+        let pieces = [
+            "",
+            "0",
+            "-",
+            ",",
+            " ",
+            "=",
+            "bytes",
+            "99999999999999999999",
+            "18446744073709551615",
+            "18446744073709551616",
+            "+",
+            "abc",
+            "\t",
+        ];
+        let mut rng = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = |n: usize| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng % n as u64) as usize
+        };
+        let (mut served, mut whole, mut refused) = (0u32, 0u32, 0u32);
+        for case in 0..10_000 {
+            let mut v = seeds[case % seeds.len()].to_string();
+            for _ in 0..1 + next(3) {
+                let at = next(v.len() + 1);
+                if next(2) == 0 {
+                    v.insert_str(at, pieces[next(pieces.len())]);
+                } else {
+                    let end = (at + next(4)).min(v.len());
+                    v.replace_range(at..end, "");
+                }
+            }
+            let len = [0u64, 1, 10, 100, u64::MAX][next(5)];
+            match parse_range(Some(&v), len) {
+                Ok(Some(r)) => {
+                    served += 1;
+                    assert!(r.start < r.end && r.end <= len, "{v:?} over {len}: {r:?}");
+                }
+                Ok(None) => whole += 1,
+                Err(BadRange(msg)) => {
+                    refused += 1;
+                    assert!(!msg.is_empty() && !v.contains(','), "{v:?}: {msg}");
+                }
+            }
+        }
+        println!("ranges: 10000 cases, {served} served, {whole} whole body, {refused} refused");
+        assert!(served > 0 && whole > 0 && refused > 0);
     }
 }

@@ -10,6 +10,7 @@ pub mod events;
 pub mod jobs;
 pub mod lod;
 pub mod models;
+pub mod multipart;
 pub mod openapi;
 pub mod pages;
 pub mod parts;
@@ -55,6 +56,8 @@ pub struct AppState {
     pub render: crate::render::RenderService,
     /// Draft region selections of every user (`/api/v1/models/{id}/selections`).
     pub selections: selections::Drafts,
+    /// Failed logins, for back-off.
+    pub logins: crate::throttle::LoginThrottle,
 }
 
 /// Why the server could not start.
@@ -105,6 +108,7 @@ impl AppState {
         Ok(AppState {
             render,
             selections: selections::Drafts::default(),
+            logins: crate::throttle::LoginThrottle::default(),
             jobs: crate::jobs::Jobs::new(db.clone(), settings.clone(), Some(search.clone())),
             lods: lod::LodRegistry::default(),
             db,

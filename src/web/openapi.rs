@@ -366,7 +366,7 @@ pub fn document() -> Value {
             "get",
             op(
                 "lod",
-                "One patch blob (docs/FORMAT.md, Patch blob): ETag = its CRC-32, Cache-Control public, max-age=31536000, immutable; If-None-Match (304); one byte range (206, 416 for a bad or multiple range)",
+                "One patch blob (docs/FORMAT.md, Patch blob): ETag = its CRC-32, Cache-Control public, max-age=31536000, immutable; If-None-Match (304); one byte range (206; 416 when unsatisfiable; a malformed or multiple range is ignored: 200)",
                 "viewer",
                 vec![
                     model_id(),

@@ -209,12 +209,14 @@ fn part_id(name: &str, s: &str) -> Result<i64, ApiError> {
         .ok_or_else(|| ApiError::bad(format!("{name} must list part ids, got {s:?}")))
 }
 
+/// A boolean query parameter. One rule for every boolean of the API: `1` or `true`, `0` or
+/// `false` (as in JSON); anything else is a 400.
 fn flag(name: &str, v: &Option<String>) -> Result<bool, ApiError> {
-    match given(v).map(str::to_ascii_lowercase).as_deref() {
-        None | Some("0" | "false" | "no") => Ok(false),
-        Some("1" | "true" | "yes") => Ok(true),
+    match given(v) {
+        None | Some("0" | "false") => Ok(false),
+        Some("1" | "true") => Ok(true),
         Some(other) => Err(ApiError::bad(format!(
-            "{name} must be 1 or 0, got {other:?}"
+            "{name} must be 1, 0, true or false, got {other:?}"
         ))),
     }
 }
@@ -811,4 +813,111 @@ async fn callouts_json(
         "callouts": layout.callouts,
         "hidden": layout.hidden,
     })))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic mutation of real viewer queries (issue 14 §8): no panic, and every
+    /// accepted query is within the limits.
+    #[test]
+    fn mutated_queries_are_refused_or_within_limits() {
+        let seeds = [
+            "eye=0.1,0.2,2.5&target=0,0,0&up=0,1,0&fovy=45&w=640&h=480&parts=1,2,3&hover=2&px=1&format=jpeg&quality=80&callouts=1",
+            "w=1280&h=720&px=0.5&buffers=normal,depth,ids&eye=1e3,-2e3,5&target=1,1,1",
+            "w=400&h=300&parts=7&callouts=true",
+        ];
+        let pieces = [
+            "",
+            "0",
+            "-1",
+            "1e39",
+            "nan",
+            "inf",
+            "4294967296",
+            ",",
+            "&",
+            "=",
+            "%00",
+            "%zz",
+            "%2C",
+            "99999999999999999999",
+            "w=",
+            "&w=70000",
+            "&h=0",
+            "&px=1e-9",
+            "&fovy=170.0001",
+            "&parts=",
+            "&parts=-5",
+            "&callouts=yes",
+            "&buffers=",
+            "&eye=1,2",
+            "&unknown=1",
+        ];
+        let limits = RenderSettings::default();
+        let mut rng = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = |n: usize| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng % n as u64) as usize
+        };
+        let (mut accepted, mut refused) = (0u32, 0u32);
+        for case in 0..10_000 {
+            let mut q = seeds[case % seeds.len()].as_bytes().to_vec();
+            for _ in 0..1 + next(3) {
+                let at = next(q.len() + 1);
+                match next(4) {
+                    0 => q.truncate(at),
+                    1 => {
+                        let end = (at + next(8)).min(q.len());
+                        q.drain(at.min(end)..end);
+                    }
+                    2 => {
+                        let p = pieces[next(pieces.len())].as_bytes();
+                        q.splice(at..at, p.iter().copied());
+                    }
+                    _ => {
+                        if let Some(b) = q.get_mut(at) {
+                            *b = [b'0', b'9', b'.', b'-', b',', b'&', b'=', b'e', 0xFF][next(9)];
+                        }
+                    }
+                }
+            }
+            let text = String::from_utf8_lossy(&q).into_owned();
+            let Ok(query) = web::Query::<RenderQuery>::from_query(&text) else {
+                refused += 1;
+                continue;
+            };
+            for route in [Route::Image, Route::Buffers, Route::Callouts] {
+                match Params::parse(&query, route, &limits) {
+                    Ok(p) => {
+                        accepted += 1;
+                        assert!(p.width >= 1 && p.width <= limits.max_side, "{text}");
+                        assert!(p.height >= 1 && p.height <= limits.max_side, "{text}");
+                        assert!(
+                            p.width as u64 * p.height as u64 <= limits.max_pixels,
+                            "{text}"
+                        );
+                        assert!(
+                            p.fovy.is_finite() && (1.0..=170.0).contains(&p.fovy),
+                            "{text}"
+                        );
+                        assert!(p.px.is_finite() && (0.25..=64.0).contains(&p.px), "{text}");
+                        assert!(p.parts.len() <= MAX_PARTS, "{text}");
+                        for v in [p.eye, p.target, p.up].into_iter().flatten() {
+                            assert!(v.is_finite(), "{text}");
+                        }
+                    }
+                    Err(e) => {
+                        refused += 1;
+                        assert!(!e.message().is_empty(), "{text}");
+                    }
+                }
+            }
+        }
+        println!("render queries: 10000 cases, {accepted} accepted, {refused} refused, 0 panics");
+        assert!(accepted > 0 && refused > 0);
+    }
 }

@@ -258,15 +258,20 @@ async fn read_body(
     while let Some(field) = form.next().await {
         let mut field = field.map_err(|e| ApiError::bad(format!("invalid multipart body: {e}")))?;
         let name = field.name().unwrap_or("").to_string();
-        let limit = match name.as_str() {
-            "request" => MAX_REQUEST_BYTES,
-            "mask" => MAX_MASK_BYTES,
+        let (limit, seen) = match name.as_str() {
+            "request" => (MAX_REQUEST_BYTES, request.is_some()),
+            "mask" => (MAX_MASK_BYTES, mask.is_some()),
             other => {
                 return Err(ApiError::bad(format!(
                     "unknown form field {other:?} (expected request and mask)"
                 )));
             }
         };
+        if seen {
+            return Err(ApiError::bad(format!(
+                "the form has more than one {name} field"
+            )));
+        }
         if name == "mask"
             && let Some(m) = field.content_type()
             && m.essence_str() != "image/png"

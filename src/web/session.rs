@@ -40,12 +40,7 @@ async fn login(
     body: web::Json<LoginRequest>,
 ) -> Result<HttpResponse, ApiError> {
     auth::check_origin(&req)?;
-    if body.username.len() > 256 || body.password.len() > 4096 {
-        return Err(ApiError::BadCredentials);
-    }
-    let user = users::authenticate(&state.db, &body.username, &body.password)
-        .await?
-        .ok_or(ApiError::BadCredentials)?;
+    let user = auth::attempt_login(&req, &state, &body.username, &body.password).await?;
     let ttl = state.settings.limits.session_ttl_secs;
     let s = sessions::create(&state.db, user.id, ttl).await?;
     Ok(HttpResponse::Ok()

@@ -22,6 +22,16 @@ pub struct Server {
 impl Server {
     /// Starts `meshwiki serve` on `data_dir` with extra arguments and waits until it listens.
     pub fn start_with(data_dir: &Path, extra: &[&str]) -> Server {
+        Server::spawn(data_dir, extra, Stdio::inherit())
+    }
+
+    /// [`Server::start_with`], the server's log (stderr, warnings and errors) written to `log`.
+    pub fn start_logging(data_dir: &Path, extra: &[&str], log: &Path) -> Server {
+        let file = std::fs::File::create(log).expect("log file");
+        Server::spawn(data_dir, extra, Stdio::from(file))
+    }
+
+    fn spawn(data_dir: &Path, extra: &[&str], stderr: Stdio) -> Server {
         let mut child = Command::new(BIN)
             .arg("serve")
             .arg("--data-dir")
@@ -30,7 +40,7 @@ impl Server {
             .args(extra)
             .env("MESHWIKI_LOG", "warn")
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
+            .stderr(stderr)
             .spawn()
             .expect("spawn meshwiki serve");
         let stdout = child.stdout.take().expect("stdout");

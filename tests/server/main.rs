@@ -4,6 +4,7 @@
 mod cli;
 mod concurrency;
 mod flow;
+mod hardening;
 mod harness;
 mod import;
 mod jobs;

@@ -367,6 +367,13 @@ fn render_images_buffers_callouts_and_part_views() {
     let (_, _, no_labels) = png(&viewer.get(&format!("{base}?w=400&h=300&parts={pid}")));
     let (_, _, labels) = png(&viewer.get(&format!("{base}?w=400&h=300&parts={pid}&callouts=1")));
     assert!(differing(&no_labels, &labels) > 300, "callouts drawn");
+    let r = viewer.get(&format!("{base}?w=400&h=300&parts={pid}&callouts=true"));
+    assert_eq!(
+        r.status,
+        200,
+        "callouts=true is a boolean too: {}",
+        r.text()
+    );
 
     // The best view and the thumbnail arrive in the background; the camera sees the part.
     let part = wait_part(&viewer, pid, |p| {
@@ -455,6 +462,9 @@ fn render_images_buffers_callouts_and_part_views() {
         ("hover=999999", "unknown part"),
         ("px=0", "px"),
         ("callouts=maybe", "callouts"),
+        // One rule for booleans: 1/0/true/false, as `callouts=2` and `yes` alike are refused.
+        ("callouts=yes", "callouts"),
+        ("callouts=2", "callouts"),
         ("buffers=normal", "buffers"),
         ("colour=red", "unknown field"),
     ] {

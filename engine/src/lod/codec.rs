@@ -517,8 +517,25 @@ fn u32_at(bytes: &[u8], at: usize) -> Result<u32, CodecError> {
         .ok_or(CodecError::Truncated)
 }
 
+/// Most payload bytes a patch of `max_triangles` triangles can take: per triangle at most 16
+/// bytes of encoded indices, per vertex (at most three per triangle) at most 96 bytes of
+/// positions, ids, colour and normal (varints are at most 10 bytes).
+pub fn payload_bound(max_triangles: u32) -> usize {
+    let t = max_triangles as usize;
+    PAYLOAD_HEADER + 16 * t + 3 * t * 96 + 4096
+}
+
 /// Decodes a blob into world-space flat arrays.
 pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
+    decode_limited(blob, grid, MAX_ELEMENTS)
+}
+
+/// [`decode`] of a blob from a file whose patches have at most `max_triangles` triangles: every
+/// size the blob declares is checked against that budget and against the bytes it holds
+/// before anything is allocated, so a damaged (or hostile) blob costs at most a bounded amount
+/// of memory (a few times [`payload_bound`]).
+pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Patch, CodecError> {
+    let max_triangles = max_triangles.min(MAX_ELEMENTS);
     if blob.len() < 12 {
         return Err(CodecError::Truncated);
     }
@@ -526,7 +543,7 @@ pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
         return Err(CodecError::Magic);
     }
     let payload_len = u32_at(blob, 8)? as usize;
-    if payload_len > 64 << 20 {
+    if payload_len > (64 << 20).min(payload_bound(max_triangles)) {
         return Err(CodecError::Sizes);
     }
     let payload = match blob[4] {
@@ -542,7 +559,11 @@ pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
     let triangle_count = u32_at(&payload, 4)?;
     let flags = u32_at(&payload, 8)?;
     let shift = u32_at(&payload, 12)?;
-    if vertex_count > MAX_ELEMENTS || triangle_count > MAX_ELEMENTS || shift > MAX_SHIFT {
+    if vertex_count > MAX_ELEMENTS
+        || triangle_count > max_triangles
+        || vertex_count > triangle_count.saturating_mul(3)
+        || shift > MAX_SHIFT
+    {
         return Err(CodecError::Sizes);
     }
     let min = [
@@ -570,6 +591,12 @@ pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
         next(lens[4])?,
     );
     let n = vertex_count as usize;
+    // Necessary for any valid blob, and what bounds the allocations below by the blob's own
+    // bytes: at least one code byte per triangle, one byte per varint (three coordinates and
+    // an id per vertex).
+    if (triangle_count as usize) > idx_s.len() || 3 * n > pos_s.len() || n > ids_s.len() {
+        return Err(CodecError::Sizes);
+    }
 
     let indices: Vec<u32> = decode_index_buffer(idx_s, triangle_count as usize * 3)
         .map_err(|_| CodecError::Stream("indices"))?;

@@ -63,6 +63,9 @@ pub struct Header {
 
 const _: () = assert!(std::mem::size_of::<Header>() == 256);
 
+/// Largest patch triangle budget a file may declare (the builder accepts 16 to 2^16).
+pub const MAX_PATCH_TRIANGLES: u32 = 1 << 16;
+
 /// One patch of the DAG.
 ///
 /// A node is drawn in a cut iff its own error is acceptable and its group's is not:
@@ -186,6 +189,11 @@ impl LodFile {
         {
             return Err(FormatError::Corrupt("misaligned table".into()));
         }
+        if header.max_patch_triangles == 0 || header.max_patch_triangles > MAX_PATCH_TRIANGLES {
+            return Err(FormatError::Corrupt(
+                "patch triangle budget out of range".into(),
+            ));
+        }
         file.check_links()?;
         Ok(file)
     }
@@ -216,8 +224,11 @@ impl LodFile {
         for node in self.nodes() {
             let group_ok = |x: u32| x == NO_GROUP || x < g;
             let end = node.blob_offset.checked_add(node.blob_len as u64);
+            let budget = self.header.max_patch_triangles;
             if !group_ok(node.producer)
                 || !group_ok(node.member_of)
+                || node.triangle_count > budget
+                || node.vertex_count > budget.saturating_mul(3)
                 || end.is_none_or(|e| e > self.map.len() as u64)
             {
                 return Err(FormatError::Corrupt("node record out of range".into()));
@@ -281,9 +292,12 @@ impl LodFile {
     /// Decodes a patch to flat arrays (world-space positions).
     pub fn patch(&self, id: u32) -> Result<super::codec::Patch, FormatError> {
         let blob = self.blob(id)?;
-        super::codec::decode(blob, &self.grid()).map_err(|reason| FormatError::Decode {
-            node: id,
-            reason: reason.to_string(),
+        let max = self.header.max_patch_triangles;
+        super::codec::decode_limited(blob, &self.grid(), max).map_err(|reason| {
+            FormatError::Decode {
+                node: id,
+                reason: reason.to_string(),
+            }
         })
     }
 

@@ -6,6 +6,14 @@
 //! at non-manifold "pinch" vertices that share no edge), and the whole topological border of the
 //! merged group (so every cut keeps exactly the scan's boundary edges). Collapses only ever keep
 //! input vertices, so every product vertex still carries its original ID.
+//!
+//! Sound output: simplification creates no non-manifold edge and no duplicate triangle, inside
+//! the group or against a neighbour simplified in the same round. The one-ring of the shared
+//! vertices is locked as well (no edge at a shared vertex changes, so two groups cannot both
+//! join the same pair of shared vertices), the result is checked for edges used more than
+//! twice and repeated triangles the input lacked, faces folded onto each other are dropped,
+//! and any other defect gets its neighbourhood locked and the group simplified again
+//! ([`sound_simplification`]).
 
 use super::hausdorff::simplification_distance;
 use super::partition::{Triangles, partition};
@@ -132,20 +140,21 @@ pub fn simplify_group(
             )
         }
     };
-    let mut simplified = run(&locks);
-    if id_border(mesh, &simplified) != border {
-        // The simplifier changed the border through some non-manifold configuration: lock the
-        // border's one-ring as well and try again; give up on this group if that fails too.
-        lock_one_ring(mesh, &mut locks);
-        simplified = run(&locks);
-        if id_border(mesh, &simplified) != border {
-            return None;
-        }
-    }
-    let new_tris = simplified.len() / 3;
-    if new_tris == 0 || new_tris as f32 > tri_count as f32 * MIN_REDUCTION {
-        return None;
-    }
+    let reduced = |tris: &[u32]| {
+        let n = tris.len() / 3;
+        n > 0 && n as f32 <= tri_count as f32 * MIN_REDUCTION
+    };
+    // First with the one-ring of every shared vertex locked too: then no edge at a vertex shared
+    // with a neighbour ever changes, so no collapse can join two shared vertices by an edge that
+    // the neighbour, simplified at the same time, creates too (a non-manifold edge or a
+    // duplicate triangle in the cut holding both), nor change the border through a
+    // non-manifold configuration; the strip is simplified at the next level, inside a larger
+    // group. Where the strip is too much of a (small, coarse) group for it to halve, again
+    // without the ring, every new edge between shared vertices then counting as a defect.
+    let simplified = [true, false].into_iter().find_map(|ring| {
+        sound_simplification(mesh, locks.clone(), ring, &border, shared_outside, &run)
+            .filter(|s| reduced(s))
+    })?;
     let mut kept = vec![false; mesh.ids.len()];
     for &i in &simplified {
         kept[i as usize] = true;
@@ -158,6 +167,67 @@ pub fn simplify_group(
         products: split(mesh, &simplified, max_triangles),
         distance,
     })
+}
+
+/// Simplifies `mesh` under `locks` (plus the one-ring of shared vertices with `ring`), keeping
+/// `border`, until the result has no defect [`new_defects`] finds: a fold of two faces onto
+/// each other is dropped, anything else gets the input one-ring of its vertices locked and
+/// another run. `None` when the border changes or defects remain after a few rounds.
+fn sound_simplification(
+    mesh: &BuildPatch,
+    mut locks: Vec<SimplifyVertex>,
+    ring: bool,
+    border: &[u64],
+    shared_outside: &dyn Fn(u32) -> bool,
+    run: &dyn Fn(&[SimplifyVertex]) -> Vec<u32>,
+) -> Option<Vec<u32>> {
+    if ring {
+        lock_shared_ring(mesh, shared_outside, &mut locks);
+    }
+    let mut simplified = run(&locks);
+    let (mut b, mut overused) = border_and_overuse(mesh, &simplified);
+    if b != border {
+        // The simplifier changed the border through some non-manifold configuration: lock the
+        // one-ring of every locked vertex as well and try again.
+        lock_one_ring(mesh, &mut locks);
+        simplified = run(&locks);
+        (b, overused) = border_and_overuse(mesh, &simplified);
+        if b != border {
+            return None;
+        }
+    }
+    // The input's topology is only needed when the output may have a defect: with the ring
+    // locked only an edge used more than twice or a repeated triangle can be one (rare).
+    let mut input: Option<Topology> = None;
+    for _ in 0..=MAX_REPAIR_ROUNDS {
+        if ring && !overused && !repeats_a_triangle(mesh, &simplified) {
+            return Some(simplified);
+        }
+        let input = input.get_or_insert_with(|| Topology::of(mesh, &mesh.indices));
+        let mut bad = new_defects(mesh, input, &simplified, shared_outside);
+        if bad.is_empty() {
+            return Some(simplified);
+        }
+        // The usual defect is a collapse that folds two faces onto each other (the same three
+        // vertices twice): both copies cover no surface, so dropping them repairs it, as long as
+        // the border stays and nothing else is wrong.
+        if let Some(repaired) = drop_repeated(mesh, input, &simplified)
+            && id_border(mesh, &repaired) == border
+        {
+            bad = new_defects(mesh, input, &repaired, shared_outside);
+            if bad.is_empty() {
+                return Some(repaired);
+            }
+        }
+        lock_around(mesh, &bad, &mut locks);
+        simplified = run(&locks);
+        let (b, over) = border_and_overuse(mesh, &simplified);
+        if b != border {
+            return None;
+        }
+        overused = over;
+    }
+    None
 }
 
 /// Positions with exact duplicates moved apart by a few ulps, and which vertices had a
@@ -188,6 +258,11 @@ fn distinct_positions(positions: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<bool>) {
 /// Border edges (used by exactly one triangle) of `indices` over `mesh`'s vertices, as
 /// sorted original-ID keys.
 fn id_border(mesh: &BuildPatch, indices: &[u32]) -> Vec<u64> {
+    border_and_overuse(mesh, indices).0
+}
+
+/// [`id_border`], and whether some edge is used by more than two triangles (one sort for both).
+fn border_and_overuse(mesh: &BuildPatch, indices: &[u32]) -> (Vec<u64>, bool) {
     let mut keys: Vec<u64> = indices
         .chunks_exact(3)
         .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
@@ -195,18 +270,187 @@ fn id_border(mesh: &BuildPatch, indices: &[u32]) -> Vec<u64> {
         .collect();
     keys.sort_unstable();
     let mut border = Vec::new();
+    let mut overused = false;
     let mut i = 0;
     while i < keys.len() {
         let mut j = i + 1;
         while j < keys.len() && keys[j] == keys[i] {
             j += 1;
         }
-        if j - i == 1 {
-            border.push(keys[i]);
+        match j - i {
+            1 => border.push(keys[i]),
+            2 => {}
+            _ => overused = true,
         }
         i = j;
     }
-    border
+    (border, overused)
+}
+
+/// Whether two triangles of `indices` have the same three vertices (either orientation).
+fn repeats_a_triangle(mesh: &BuildPatch, indices: &[u32]) -> bool {
+    let mut keys: Vec<u128> = indices
+        .chunks_exact(3)
+        .map(|t| {
+            let mut k = [0, 1, 2].map(|c| mesh.ids[t[c] as usize]);
+            k.sort_unstable();
+            (k[0] as u128) << 64 | (k[1] as u128) << 32 | k[2] as u128
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.windows(2).any(|w| w[0] == w[1])
+}
+
+/// Simplification rounds with more locks before a group with defects is left unsimplified.
+const MAX_REPAIR_ROUNDS: usize = 4;
+
+/// Edge use counts and repeated triangles of a triangle set, by original id (sorted runs:
+/// cheaper than hashing on the build's hot path).
+struct Topology {
+    /// (edge key, triangles using it), sorted by key.
+    edges: Vec<(u64, u32)>,
+    /// Triangles (sorted corner ids) that occur more than once, with their count, sorted.
+    repeated: Vec<([u32; 3], u32)>,
+}
+
+fn runs<T: Copy + Ord>(mut keys: Vec<T>) -> Vec<(T, u32)> {
+    keys.sort_unstable();
+    let mut out: Vec<(T, u32)> = Vec::with_capacity(keys.len());
+    for k in keys {
+        match out.last_mut() {
+            Some((last, c)) if *last == k => *c += 1,
+            _ => out.push((k, 1)),
+        }
+    }
+    out
+}
+
+impl Topology {
+    fn of(mesh: &BuildPatch, indices: &[u32]) -> Topology {
+        let n = indices.len() / 3;
+        let mut edges = Vec::with_capacity(n * 3);
+        let mut tris = Vec::with_capacity(n);
+        for tri in indices.chunks_exact(3) {
+            let ids = [0, 1, 2].map(|k| mesh.ids[tri[k] as usize]);
+            if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
+                continue;
+            }
+            for k in 0..3 {
+                edges.push(edge_key(ids[k], ids[(k + 1) % 3]));
+            }
+            let mut key = ids;
+            key.sort_unstable();
+            tris.push(key);
+        }
+        let mut repeated = runs(tris);
+        repeated.retain(|&(_, c)| c > 1);
+        Topology {
+            edges: runs(edges),
+            repeated,
+        }
+    }
+
+    fn edge_count(&self, e: u64) -> u32 {
+        self.edges
+            .binary_search_by_key(&e, |&(k, _)| k)
+            .map_or(0, |i| self.edges[i].1)
+    }
+
+    fn repeat_count(&self, t: &[u32; 3]) -> u32 {
+        self.repeated
+            .binary_search_by_key(t, |&(k, _)| k)
+            .map_or(1, |i| self.repeated[i].1)
+    }
+}
+
+/// Original ids of the vertices of every defect the simplification `after` created that the
+/// input (`before`) did not have:
+/// * an edge used by more than two triangles, or a triangle repeated (either orientation);
+/// * a new edge between two vertices both shared with patches outside the group: a neighbour
+///   simplified in the same round may create the same edge (or the same triangle) on its side,
+///   which would make the edge non-manifold (or the triangle duplicate) in the cut that holds
+///   both. (The locked one-ring of shared vertices makes this impossible; checked all the same.)
+fn new_defects(
+    mesh: &BuildPatch,
+    before: &Topology,
+    after: &[u32],
+    shared_outside: &dyn Fn(u32) -> bool,
+) -> Vec<u32> {
+    let now = Topology::of(mesh, after);
+    let mut bad = Vec::new();
+    for &(e, count) in &now.edges {
+        let (a, b) = super::patch::edge_ends(e);
+        // Cheap tests first: most edges are used twice and join an interior vertex.
+        let suspicious = count > 2 || (shared_outside(a) && shared_outside(b));
+        if !suspicious {
+            continue;
+        }
+        let had = before.edge_count(e);
+        if (count > 2 && count > had) || had == 0 {
+            bad.extend([a, b]);
+        }
+    }
+    for (t, count) in &now.repeated {
+        if *count > before.repeat_count(t) {
+            bad.extend_from_slice(t);
+        }
+    }
+    bad.sort_unstable();
+    bad.dedup();
+    bad
+}
+
+/// `after` without the triangles it repeats (every copy) that `before` did not repeat; `None`
+/// when there are none.
+fn drop_repeated(mesh: &BuildPatch, before: &Topology, after: &[u32]) -> Option<Vec<u32>> {
+    let now = Topology::of(mesh, after);
+    let extra: Vec<[u32; 3]> = now
+        .repeated
+        .iter()
+        .filter(|(t, c)| *c > before.repeat_count(t))
+        .map(|(t, _)| *t)
+        .collect();
+    if extra.is_empty() {
+        return None;
+    }
+    let mut out = Vec::with_capacity(after.len());
+    for tri in after.chunks_exact(3) {
+        let mut key = [0, 1, 2].map(|k| mesh.ids[tri[k] as usize]);
+        key.sort_unstable();
+        if extra.binary_search(&key).is_err() {
+            out.extend_from_slice(tri);
+        }
+    }
+    Some(out)
+}
+
+/// Locks the vertices with the given original ids and every vertex of the input triangles
+/// around them, so no collapse near them can happen again.
+fn lock_around(mesh: &BuildPatch, ids: &[u32], locks: &mut [SimplifyVertex]) {
+    let marked: rustc_hash::FxHashSet<u32> = ids.iter().copied().collect();
+    for t in mesh.indices.chunks_exact(3) {
+        if t.iter().any(|&v| marked.contains(&mesh.ids[v as usize])) {
+            for &v in t {
+                locks[v as usize] = SimplifyVertex::Lock;
+            }
+        }
+    }
+}
+
+/// Locks every vertex adjacent to a vertex shared with a patch outside the group.
+fn lock_shared_ring(
+    mesh: &BuildPatch,
+    shared_outside: &dyn Fn(u32) -> bool,
+    locks: &mut [SimplifyVertex],
+) {
+    let shared: Vec<bool> = mesh.ids.iter().map(|&id| shared_outside(id)).collect();
+    for t in mesh.indices.chunks_exact(3) {
+        if t.iter().any(|&v| shared[v as usize]) {
+            for &v in t {
+                locks[v as usize] = SimplifyVertex::Lock;
+            }
+        }
+    }
 }
 
 /// Also locks every vertex adjacent to a locked vertex.

@@ -303,6 +303,8 @@ pub(crate) struct LineReader<R> {
     pub line_start: u64,
     /// Byte offset just after the line last returned.
     pub offset: u64,
+    /// Whether the line last returned ended with a newline (not cut off by the end of input).
+    pub terminated: bool,
 }
 
 impl LineReader<BufReader<File>> {
@@ -319,6 +321,7 @@ impl<R: BufRead> LineReader<R> {
             line: 0,
             line_start: 0,
             offset: 0,
+            terminated: false,
         }
     }
 
@@ -342,7 +345,8 @@ impl<R: BufRead> LineReader<R> {
         self.line += 1;
         self.line_start = self.offset;
         self.offset += n as u64;
-        if self.buf.last() == Some(&b'\n') {
+        self.terminated = self.buf.last() == Some(&b'\n');
+        if self.terminated {
             self.buf.pop();
         } else if n as u64 >= limit {
             return Err(err(

@@ -41,6 +41,18 @@ pub enum ImportErrorKind {
     NonFinite(String, u64),
     #[error("vertex index {index} out of range (only {count} vertices) in face {face}")]
     IndexOutOfRange { index: i64, count: u64, face: u64 },
+    /// A face names a vertex beyond the count a header declared (PLY): most often the header's
+    /// vertex count is smaller than the vertex data that follows it.
+    #[error(
+        "face {face} names vertex {index}, but the header declares only {count} vertices \
+         (line {line}): that vertex count is smaller than the vertex data, or the faces are damaged"
+    )]
+    BeyondDeclaredVertices {
+        index: i64,
+        count: u64,
+        face: u64,
+        line: u64,
+    },
     #[error("no triangles in the file")]
     Empty,
     /// The sink refused the data (disk full, cancelled, limits).

@@ -107,7 +107,8 @@ pub(crate) fn read(
         has_normals |= prim.get(&Semantic::Normals).is_some();
         let n = prim.get(&Semantic::Positions).map_or(0, |a| a.count());
         let idx = prim.indices().map_or(n, |a| a.count());
-        total = total.saturating_add((n + idx) as u64);
+        // Counts come from the file: they are checked against the buffers when read.
+        total = total.saturating_add((n as u64).saturating_add(idx as u64));
     }
 
     // Progress is reported in bytes (main file and external buffers), in proportion to the

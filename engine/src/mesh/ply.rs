@@ -294,6 +294,16 @@ impl Header {
                 ));
             };
             let n = lines.line;
+            if !lines.terminated {
+                // The file ends inside the header: whatever this last line says is cut off.
+                return Err(err(
+                    path,
+                    Location::Line(n),
+                    K::Truncated(format!(
+                        "the file ends inside its header (line {n}, before 'end_header')"
+                    )),
+                ));
+            }
             let mut t = Tokens::new(&line);
             let Some(key) = t.next() else { continue };
             match key {
@@ -877,11 +887,7 @@ impl BinaryReader<'_> {
             err(
                 self.path,
                 Location::Byte(at as u64),
-                K::IndexOutOfRange {
-                    index,
-                    count: nv,
-                    face,
-                },
+                out_of_range_kind(index, nv, face, self.header.elements[self.plan.vertex].line),
             )
         };
         let Kind::List { item, .. } = el.props[index_prop].kind else {
@@ -1157,11 +1163,22 @@ impl AsciiReader<'_> {
                             return Err(too_few(path, line_no, el, n, &prop.name));
                         };
                         let Some(len) = parse_i64(len_tok).filter(|&l| l >= 0) else {
+                            // A coordinate where a face was expected: the header declared
+                            // fewer vertices than the file holds.
+                            let hint = if n == 0 && parse_f64(len_tok).is_some() {
+                                format!(
+                                    ": this looks like vertex data, so the header's vertex count \
+                                     ({nv}, line {}) is probably smaller than the vertex data",
+                                    self.header.elements[self.plan.vertex].line
+                                )
+                            } else {
+                                String::new()
+                            };
                             return Err(err(
                                 path,
                                 Location::Line(line_no),
                                 K::Syntax(format!(
-                                    "bad list length '{}' in '{}' {n}",
+                                    "bad list length '{}' in '{}' {n}{hint}",
                                     show(len_tok),
                                     el.name
                                 )),
@@ -1185,11 +1202,12 @@ impl AsciiReader<'_> {
                                 return Err(err(
                                     path,
                                     Location::Line(line_no),
-                                    K::IndexOutOfRange {
-                                        index: v,
-                                        count: nv,
-                                        face: n,
-                                    },
+                                    out_of_range_kind(
+                                        v,
+                                        nv,
+                                        n,
+                                        self.header.elements[self.plan.vertex].line,
+                                    ),
                                 ));
                             }
                             if strip {
@@ -1222,6 +1240,21 @@ fn parse_value(s: Scalar, tok: &[u8]) -> Option<f64> {
         _ => parse_i64(tok)
             .map(|v| v as f64)
             .or_else(|| parse_f64(tok).filter(|v| v.fract() == 0.0)),
+    }
+}
+
+/// A face index outside the vertices: past the header's count (most often that count is too
+/// small for the data), or negative.
+fn out_of_range_kind(index: i64, count: u64, face: u64, line: u64) -> K {
+    if index >= 0 {
+        K::BeyondDeclaredVertices {
+            index,
+            count,
+            face,
+            line,
+        }
+    } else {
+        K::IndexOutOfRange { index, count, face }
     }
 }
 

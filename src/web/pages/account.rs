@@ -1,15 +1,15 @@
 //! `/login` and `/logout`.
 
-use actix_web::http::StatusCode;
+use actix_web::ResponseError as _;
 use actix_web::{HttpRequest, HttpResponse, web};
 use askama::Template;
 use serde::Deserialize;
 
 use super::{CsrfOnly, Layout, redirect, render, render_status};
-use crate::store::{sessions, users};
+use crate::store::sessions;
 use crate::web::auth::{self, PageAuth, PageForm};
 use crate::web::error::safe_next;
-use crate::web::{AppState, PageError};
+use crate::web::{ApiError, AppState, PageError};
 
 /// Mounts the pages.
 pub fn configure(cfg: &mut web::ServiceConfig) {
@@ -67,21 +67,31 @@ async fn login(
 ) -> Result<HttpResponse, PageError> {
     auth::check_origin(&req)?;
     let next = safe_next(&form.next).to_string();
-    let user = if form.username.len() <= 256 && form.password.len() <= 4096 {
-        users::authenticate(&state.db, &form.username, &form.password).await?
-    } else {
-        None
-    };
-    let Some(user) = user else {
-        return render_status(
-            StatusCode::UNAUTHORIZED,
-            &LoginPage {
-                layout: Layout::anonymous("Log in"),
-                next,
-                username: form.username.clone(),
-                error: "Invalid user name or password.".into(),
-            },
-        );
+    let user = match auth::attempt_login(&req, &state, &form.username, &form.password).await {
+        Ok(user) => user,
+        Err(e @ (ApiError::BadCredentials | ApiError::TooManyRequests { .. })) => {
+            let error = match e.retry_after() {
+                Some(secs) => format!("Too many failed logins: try again in {secs} s."),
+                None => "Invalid user name or password.".into(),
+            };
+            let mut resp = render_status(
+                e.status_code(),
+                &LoginPage {
+                    layout: Layout::anonymous("Log in"),
+                    next,
+                    username: form.username.clone(),
+                    error,
+                },
+            )?;
+            if let Some(secs) = e.retry_after() {
+                resp.headers_mut().insert(
+                    actix_web::http::header::RETRY_AFTER,
+                    actix_web::http::header::HeaderValue::from(secs),
+                );
+            }
+            return Ok(resp);
+        }
+        Err(e) => return Err(e.into()),
     };
     let ttl = state.settings.limits.session_ttl_secs;
     let s = sessions::create(&state.db, user.id, ttl).await?;

@@ -4,7 +4,7 @@
 
 use actix_multipart::Multipart;
 use actix_web::http::StatusCode;
-use actix_web::{HttpResponse, web};
+use actix_web::{HttpRequest, HttpResponse, web};
 use askama::Template;
 use serde::Deserialize;
 
@@ -446,9 +446,12 @@ async fn revert(
 async fn upload(
     state: web::Data<AppState>,
     auth: PageAuth,
+    req: HttpRequest,
     id: web::Path<i64>,
     form: Multipart,
 ) -> Result<HttpResponse, PageError> {
+    // A multipart form is no `PageForm`: check the origin here, as every other form does.
+    crate::web::auth::check_origin(&req)?;
     auth.require(Role::Editor)?;
     contents::get(&state.db, *id).await?;
     let received = crate::web::attachments::receive(&state, form, Some(auth.csrf()))
