@@ -681,6 +681,12 @@ fn broken_corpus() {
         ("short.ply", format!("{PLY_HDR}0 0 0\n1 0 0\n").into_bytes(), Location::Line(3), &["truncated", "3 'vertex' elements"]),
         ("eof.ply", format!("{PLY_HDR}0.000000 0.000000 0.000000\n1.000000 0.000000 0.000000\n0.000000 1.000000 0.000000\n").into_bytes(), Location::Line(13), &["truncated", "after 0 of 1 'face'"]),
         ("wrongcount.ply", format!("{PLY_HDR}0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n").into_bytes(), Location::Line(14), &["after the last element"]),
+        // Cut off inside the header: the cause, not the half word ("property type 'flo'").
+        ("cut_header.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty flo".to_vec(), Location::Line(4), &["truncated", "ends inside its header"]),
+        ("cut_header2.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty ".to_vec(), Location::Line(4), &["truncated", "ends inside its header"]),
+        // A vertex count smaller than the vertex data: named as such.
+        ("fewverts.ply", format!("{}0.0 0.0 0.0\n1.0 0.0 0.0\n0.0 1.0 0.0\n3 0 1 2\n", PLY_HDR.replace("vertex 3", "vertex 2")).into_bytes(), Location::Line(12), &["vertex data", "vertex count (2, line 3)"]),
+        ("fewverts_bin.ply", ply_bin(&BIN_HDR.replace("vertex 3", "vertex 1"), &{ let mut d = tri_bin([0, 1, 2], 3); d.truncate(12); d.extend_from_slice(&[3, 0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 0, 0]); d }), Location::Byte(181), &["index 2", "declares only 1 vertices", "smaller than the vertex data"]),
         ("novertex.ply", b"ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n".to_vec(), Location::Line(5), &["no 'vertex' element"]),
         ("empty.ply", Vec::new(), Location::File, &["empty"]),
         ("points.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n".to_vec(), Location::File, &["no triangles"]),

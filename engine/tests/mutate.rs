@@ -429,7 +429,7 @@ fn gltf_parts(s: &Seed, embedded: bool) -> (String, Vec<u8>) {
     let mut bin = Vec::new();
     let mut views = Vec::new();
     let mut push = |bin: &mut Vec<u8>, bytes: &[u8]| {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         views.push((bin.len(), bytes.len()));
@@ -462,7 +462,7 @@ fn gltf_parts(s: &Seed, embedded: bool) -> (String, Vec<u8>) {
     if embedded {
         push(&mut bin, &png);
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let view_json: Vec<String> = views
@@ -507,7 +507,7 @@ fn gltf_parts(s: &Seed, embedded: bool) -> (String, Vec<u8>) {
 fn glb(s: &Seed) -> Vec<u8> {
     let (json, bin) = gltf_parts(s, true);
     let mut json = json.into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();
@@ -534,7 +534,7 @@ fn reseal(b: &mut [u8]) {
     let size = b.len() as u64;
     let table = |off: u64, len: u64| -> Option<std::ops::Range<usize>> {
         let end = off.checked_add(len)?;
-        (end <= size).then(|| off as usize..end as usize)
+        (end <= size).then_some(off as usize..end as usize)
     };
     let mut h2 = h;
     if let Some(r) = table(h.nodes_offset, h.node_count as u64 * 128) {

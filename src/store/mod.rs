@@ -156,8 +156,24 @@ impl Db {
     }
 
     /// Begins a write transaction (`BEGIN IMMEDIATE` on the single writer).
+    ///
+    /// A commit that failed (a full disk, an I/O error) can leave the writer connection inside
+    /// a transaction as sqlx sees it, and every later `BEGIN` on it would fail: that
+    /// connection is closed (SQLite rolls back whatever it still held) and a fresh one takes
+    /// its place, so a failed write costs that one request, not every write after it.
     pub async fn begin(&self) -> Result<Tx> {
-        Ok(self.write.begin_with("BEGIN IMMEDIATE").await?)
+        match self.write.begin_with("BEGIN IMMEDIATE").await {
+            Err(sqlx::Error::InvalidSavePointStatement | sqlx::Error::BeginFailed) => {
+                tracing::warn!(
+                    "the database writer was left inside a failed transaction: reopening it"
+                );
+                let mut conn = self.write.acquire().await?;
+                conn.close_on_drop();
+                drop(conn);
+                Ok(self.write.begin_with("BEGIN IMMEDIATE").await?)
+            }
+            other => Ok(other?),
+        }
     }
 
     /// Closes both pools (checkpointing the WAL).

@@ -3,6 +3,7 @@
 
 mod cli;
 mod concurrency;
+mod faults;
 mod flow;
 mod hardening;
 mod harness;

@@ -44,7 +44,7 @@ pub enum ImportErrorKind {
     /// A face names a vertex beyond the count a header declared (PLY): most often the header's
     /// vertex count is smaller than the vertex data that follows it.
     #[error(
-        "face {face} names vertex {index}, but the header declares only {count} vertices \
+        "face {face} names vertex index {index}, but the header declares only {count} vertices \
          (line {line}): that vertex count is smaller than the vertex data, or the faces are damaged"
     )]
     BeyondDeclaredVertices {
