@@ -134,7 +134,13 @@ pub async fn attempt_login(
 ) -> Result<User, ApiError> {
     let addr = client_addr(req, &state.settings.trusted_proxies);
     let now = std::time::Instant::now();
-    let shown: String = username.chars().take(64).collect();
+    // The name as logged and audited: bounded, and without control characters (no forged
+    // log lines).
+    let shown: String = username
+        .chars()
+        .map(|c| if c.is_control() { '?' } else { c })
+        .take(64)
+        .collect();
     if let Err(left) = state.logins.check(username, addr, now) {
         let secs = left.as_secs_f64().ceil().max(1.0) as u64;
         // Logged, not audited: a refused attempt checks nothing, and one database write per
