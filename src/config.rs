@@ -11,6 +11,13 @@
 
 use std::path::{Path, PathBuf};
 
+/// What `meshwiki serve` prints on standard output, followed by its address, once it
+/// listens (tests and benches wait for it).
+pub const LISTENING: &str = "meshwiki listening on ";
+
+/// Default interval of the sweep of `uploads/` for files of interrupted uploads.
+pub const UPLOAD_SWEEP_EVERY: std::time::Duration = std::time::Duration::from_secs(60);
+
 /// Default bind address of `meshwiki serve`.
 pub const DEFAULT_BIND: &str = "127.0.0.1:8080";
 /// Default data directory.
@@ -146,7 +153,7 @@ impl Settings {
             cookie_secure: false,
             workers: 0,
             trusted_proxies: Vec::new(),
-            upload_sweep: crate::uploads::SWEEP_EVERY,
+            upload_sweep: UPLOAD_SWEEP_EVERY,
             limits: Limits::default(),
             build: BuildSettings::default(),
             render: RenderSettings::default(),

@@ -1,9 +1,12 @@
 //! meshwiki: a knowledge server that attaches wiki information to regions of huge 3D scans.
 //!
-//! The server crate: relational store ([`store`]), full-text search ([`search`]), wiki
-//! rendering ([`wiki`]), background LOD builds ([`jobs`]) and the HTTP layer ([`web`]). Geometry
-//! lives in `meshwiki-engine`.
+//! The server crate: the application layer ([`app`], where use cases are orchestrated), the
+//! relational store ([`store`]), full-text search ([`search`]), wiki rendering ([`wiki`]),
+//! background LOD builds ([`jobs`]), server-side rendering ([`render`]) and the HTTP layer
+//! ([`web`]). Geometry lives in `meshwiki-engine`. Dependencies point downwards only (see
+//! `docs/ARCHITECTURE.md`).
 
+pub mod app;
 pub mod blobs;
 pub mod config;
 pub mod jobs;
@@ -11,6 +14,7 @@ pub mod render;
 pub mod search;
 pub mod seed;
 pub mod store;
+pub mod terminal;
 pub mod throttle;
 pub mod uploads;
 pub mod web;

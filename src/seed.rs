@@ -255,7 +255,7 @@ pub async fn seed_demo_model(
     let part = parts::create(
         db,
         model_id,
-        &parts::NewPart {
+        &parts::PartState {
             kind: parts::PartKind::Region,
             center,
             camera: Some(parts::Camera {
@@ -265,10 +265,10 @@ pub async fn seed_demo_model(
                 fovy: 40.0,
                 auto: false,
             }),
-            vertex_ids: Some(ids),
+            vertices: ids.into_iter().collect(),
             thumbnail_attachment_id: None,
         },
-        user_id,
+        &parts::Provenance::by(user_id, Some("Seeded with the demo model".into())),
         settings.limits.part_vertices,
     )
     .await?;

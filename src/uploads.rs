@@ -17,9 +17,6 @@ use std::time::Duration;
 /// Temporary files of earlier versions (`<random>.tmp`, no pid) are removed past this age.
 pub const LEGACY_TMP_AGE: Duration = Duration::from_secs(60);
 
-/// How often a running server sweeps `uploads/` by default.
-pub const SWEEP_EVERY: Duration = Duration::from_secs(60);
-
 fn live() -> MutexGuard<'static, HashSet<PathBuf>> {
     static LIVE: OnceLock<Mutex<HashSet<PathBuf>>> = OnceLock::new();
     LIVE.get_or_init(Default::default)

@@ -4,21 +4,18 @@
 //! with Ctrl-C); on any error the model is marked failed with the message, nothing else is
 //! left, and the command exits non-zero.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meshwiki::Settings;
-use meshwiki::jobs::{JobEnd, JobProgress, Jobs, SCAN_EXTENSIONS, parse_size};
+use meshwiki::jobs::{JobEnd, JobProgress, Jobs, parse_size};
 use meshwiki::store::Db;
 use meshwiki::store::jobs::{self, JobKind, JobOptions, NewJob};
 use meshwiki::store::models::NewModel;
 use meshwiki::store::users::{self, Role, User};
-use meshwiki_engine::lod::BuildReport;
-use meshwiki_engine::progress::Progress;
+use meshwiki::terminal::{Bar, check_input, print_summary};
 
 use super::DataDirArgs;
 
@@ -50,43 +47,6 @@ pub struct Args {
     pub data: DataDirArgs,
 }
 
-/// Draws the engine's progress on a terminal bar.
-pub struct Bar(pub ProgressBar);
-
-impl Bar {
-    /// A bar on standard error (hidden when it is not a terminal).
-    pub fn new() -> Bar {
-        let bar = ProgressBar::with_draw_target(Some(0), ProgressDrawTarget::stderr());
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{spinner} {msg:>20} [{bar:30}] {percent:>3}% {human_pos}/{human_len} ({elapsed})",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        bar.enable_steady_tick(Duration::from_millis(200));
-        Bar(bar)
-    }
-}
-
-impl Default for Bar {
-    fn default() -> Self {
-        Bar::new()
-    }
-}
-
-impl Progress for Bar {
-    fn stage(&self, name: &str, total: u64) {
-        self.0.set_length(total);
-        self.0.set_position(0);
-        self.0.set_message(name.to_string());
-    }
-
-    fn advance(&self, done: u64) {
-        self.0.inc(done);
-    }
-}
-
 /// The owner: `name`, or the first enabled admin.
 pub async fn owner(db: &Db, name: Option<&str>) -> anyhow::Result<User> {
     if let Some(name) = name {
@@ -105,68 +65,9 @@ pub async fn owner(db: &Db, name: Option<&str>) -> anyhow::Result<User> {
         )
 }
 
-/// Checks that `path` is a readable file of a known format.
-pub fn check_input(path: &Path) -> anyhow::Result<u64> {
-    let meta =
-        std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?;
-    if !meta.is_file() {
-        bail!("{} is not a file", path.display());
-    }
-    if meshwiki_engine::mesh::Format::from_path(path).is_none() {
-        bail!(
-            "{}: unknown file extension (expected {SCAN_EXTENSIONS})",
-            path.display()
-        );
-    }
-    Ok(meta.len())
-}
-
-fn mb(bytes: u64) -> f64 {
-    bytes as f64 / 1e6
-}
-
-/// Prints the summary of a build.
-pub fn print_summary(report: &BuildReport) {
-    let seconds = report.seconds;
-    let i = &report.import;
-    let attrs = match (i.has_colors, i.has_normals) {
-        (true, true) => "colours, normals",
-        (true, false) => "colours",
-        (false, true) => "normals",
-        (false, false) => "no colours or normals",
-    };
-    println!(
-        "  input        {} triangles, {} vertices ({attrs}); {} degenerate faces skipped",
-        i.triangles, i.vertices, i.degenerate_faces
-    );
-    println!(
-        "  hierarchy    {} levels, {} nodes, {} groups, {} roots ({} triangles at the top)",
-        report.levels, report.nodes, report.groups, report.roots, report.root_triangles
-    );
-    let stages: Vec<String> = report
-        .stages
-        .iter()
-        .map(|(name, s)| format!("{name} {s:.2} s"))
-        .collect();
-    println!("  time         {seconds:.2} s ({})", stages.join(", "));
-    println!(
-        "  throughput   {:.0} input triangles/s",
-        i.triangles as f64 / seconds.max(1e-9)
-    );
-    match report.peak_rss_bytes {
-        Some(b) => println!("  peak memory  {:.0} MB", mb(b)),
-        None => println!("  peak memory  unknown on this platform"),
-    }
-    println!(
-        "  output       {:.2} MB ({:.2} bytes per input triangle)",
-        mb(report.output_bytes),
-        report.output_bytes as f64 / (i.triangles.max(1)) as f64
-    );
-}
-
 /// Runs `import`.
 pub async fn run(args: Args) -> anyhow::Result<()> {
-    let bytes = check_input(&args.file)?;
+    let bytes = check_input(&args.file).map_err(anyhow::Error::msg)?;
     let settings = Settings::new(&args.data.data_dir);
     settings.ensure_dirs().with_context(|| {
         format!(

@@ -1,12 +1,8 @@
-//! Command-line interface. One file per subcommand; add a variant to [`Command`] (or to
-//! [`BenchCommand`]) and a match arm in [`run`] to extend it. Every subcommand takes
-//! `--data-dir` (env `MESHWIKI_DATA_DIR`); settings also come from `MESHWIKI_*` variables.
+//! Command-line interface. One file per subcommand; add a variant to [`Command`] and a match
+//! arm in [`run`] to extend it. Every subcommand takes `--data-dir` (env `MESHWIKI_DATA_DIR`);
+//! settings also come from `MESHWIKI_*` variables. The benchmarks are a separate binary
+//! (`bench/`, `meshwiki-bench`): the product binary keeps only what an operator runs.
 
-pub mod bench_build;
-pub mod bench_maxflow;
-pub mod bench_render;
-pub mod bench_search;
-pub mod bench_select;
 pub mod demo;
 pub mod export_cut;
 pub mod import;
@@ -14,7 +10,6 @@ pub mod lod;
 pub mod reindex;
 pub mod render_check;
 pub mod serve;
-pub mod untar;
 pub mod user;
 
 use std::path::PathBuf;
@@ -49,9 +44,6 @@ pub enum Command {
     Import(import::Args),
     /// Write the mesh of one cut through a model's hierarchy as binary PLY (`original_id`).
     ExportCut(export_cut::Args),
-    /// Benchmarks (figures are printed, never asserted).
-    #[command(subcommand)]
-    Bench(BenchCommand),
     /// Developer tools for `.mwlod` files (build one from a scan, dump it as JSON).
     #[command(subcommand)]
     Lod(lod::LodCommand),
@@ -64,32 +56,6 @@ pub enum Command {
 pub enum UserCommand {
     /// Add a user; the password is read from standard input.
     Add(user::AddArgs),
-}
-
-/// `bench` subcommands.
-#[derive(Debug, Subcommand)]
-pub enum BenchCommand {
-    /// Index generated contents and measure query latency.
-    Search(bench_search::Args),
-    /// Build a scan's LOD hierarchy: throughput, peak memory, output size vs nxsbuild.
-    Build(bench_build::Args),
-    /// The max-flow solver on the reference grid instances (`../shared/data/maxflow`).
-    Maxflow {
-        /// Directory of the instances or their archive (default `../shared/data/maxflow`).
-        dir: Option<PathBuf>,
-    },
-    /// Server-side rendering of a camera path at 1280x720 and 1 px on the software adapter
-    /// (`.mwlod`, a scan, or `synth:N`): frame time p50/p95, triangles, patches, memory.
-    Render {
-        /// The model: a `.mwlod` file, a scan file or `synth:N` (e.g. `synth:10000000`).
-        model: PathBuf,
-        /// Write a few frames and a JSON summary here.
-        #[arg(long = "out", value_name = "DIR")]
-        out_dir: Option<PathBuf>,
-    },
-    /// The selection tools (heavy lasso, markup, lasso) through the real server against the
-    /// Princeton segmentation benchmark: error vs ground truth and latency per tool.
-    Select(bench_select::Args),
 }
 
 /// The data directory.
@@ -228,18 +194,6 @@ pub async fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Demo(args) => demo::run(args).await,
         Command::Import(args) => import::run(args).await,
         Command::ExportCut(args) => export_cut::run(args).await,
-        Command::Bench(BenchCommand::Search(args)) => bench_search::run(args).await,
-        Command::Bench(BenchCommand::Build(args)) => bench_build::run(args).await,
-        Command::Bench(BenchCommand::Maxflow { dir }) => {
-            tokio::task::spawn_blocking(move || bench_maxflow::run(dir.as_deref())).await?
-        }
-        Command::Bench(BenchCommand::Render { model, out_dir }) => {
-            tokio::task::spawn_blocking(move || bench_render::run(&model, out_dir.as_deref()))
-                .await?
-        }
-        Command::Bench(BenchCommand::Select(args)) => {
-            tokio::task::spawn_blocking(move || bench_select::run(args)).await?
-        }
         Command::Lod(command) => lod::run(command),
         Command::RenderCheck(args) => {
             tokio::task::spawn_blocking(move || render_check::run(&args)).await?

@@ -14,7 +14,7 @@ pub async fn run(args: ServerArgs) -> anyhow::Result<()> {
 }
 
 /// What `serve` prints before each bound address (scripts and tests wait for it).
-pub const LISTENING: &str = "meshwiki listening on ";
+pub use meshwiki::config::LISTENING;
 
 /// Serves an opened state, printing `meshwiki listening on http://ADDR` once bound.
 pub async fn serve(state: AppState) -> anyhow::Result<()> {

@@ -1,19 +1,18 @@
 //! Server-side rendering (issue 4): one [`RenderService`] per process owns the GPU device
 //! (a hardware adapter when there is one, else Mesa's lavapipe), the engine's [`Renderer`]
-//! with its patch cache (one global budget), the open models, and the bounded worker pool
-//! ([`pool`]) every render goes through: the render API (`web::render`), model thumbnails
-//! (`jobs::thumbnail`) and part thumbnails and best views ([`views`]).
+//! with its patch cache (one global budget), and the bounded worker pool ([`pool`]) every
+//! render goes through: the render API (`web::render`), selections (`app::selections`), model
+//! thumbnails (`jobs::thumbnail`) and part thumbnails and best views (`app::views`). Models
+//! are opened by the application's model registry (`app::models`), which drops a closed
+//! model's patches from the cache.
 //!
 //! Where no adapter opens, the service is *unavailable*: it logs why once at start-up, the
 //! render routes answer 503 with that message, and everything else is served as usual.
 
 pub mod pool;
-pub mod views;
 
-use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, OnceLock};
-use std::time::{Duration, Instant, SystemTime};
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
 
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::render::encode::{self, EncodeError, ImageFormat};
@@ -23,9 +22,6 @@ use meshwiki_engine::render::{
 
 use crate::config::RenderSettings;
 pub use pool::{MemoryHold, Pool, PoolError, Ticket};
-
-/// Open models kept at most (their patches stay in the shared cache while they are open).
-const MODELS: usize = 16;
 
 /// Why a render could not be served.
 #[derive(Debug, thiserror::Error)]
@@ -70,41 +66,10 @@ impl From<RenderError> for RenderServiceError {
     }
 }
 
-/// Identity of a file on disk: a rebuilt model is reopened.
-#[derive(Debug, Clone, PartialEq, Eq)]
-struct FileKey {
-    path: PathBuf,
-    len: u64,
-    modified: Option<SystemTime>,
-    ino: u64,
-}
-
-impl FileKey {
-    fn of(path: &Path, m: &std::fs::Metadata) -> FileKey {
-        #[cfg(unix)]
-        let ino = std::os::unix::fs::MetadataExt::ino(m);
-        #[cfg(not(unix))]
-        let ino = 0;
-        FileKey {
-            path: path.to_path_buf(),
-            len: m.len(),
-            modified: m.modified().ok(),
-            ino,
-        }
-    }
-}
-
-struct ModelEntry {
-    key: FileKey,
-    model: Model,
-    used: Instant,
-}
-
 struct Inner {
     renderer: Result<Arc<Renderer>, String>,
     adapter: Option<String>,
     pool: Pool,
-    models: Mutex<HashMap<i64, ModelEntry>>,
     settings: RenderSettings,
 }
 
@@ -121,10 +86,6 @@ impl std::fmt::Debug for RenderService {
             .field("admitted", &self.inner.pool.admitted())
             .finish()
     }
-}
-
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 impl RenderService {
@@ -186,7 +147,6 @@ impl RenderService {
                     settings.memory_bytes,
                     Duration::from_secs(settings.queue_wait_secs.max(1)),
                 ),
-                models: Mutex::new(HashMap::new()),
                 settings: settings.clone(),
             }),
         }
@@ -225,64 +185,6 @@ impl RenderService {
     /// The worker pool.
     pub fn pool(&self) -> &Pool {
         &self.inner.pool
-    }
-
-    /// The open model of `model_id` whose LOD file is `path` (opened, or reopened when the
-    /// file changed; the least recently used model beyond [`MODELS`] is closed and its
-    /// patches dropped from the cache).
-    pub async fn model(&self, model_id: i64, path: PathBuf) -> Result<Model, RenderServiceError> {
-        let meta = tokio::fs::metadata(&path)
-            .await
-            .map_err(|e| RenderServiceError::Lod(format!("{}: {e}", path.display())))?;
-        let key = FileKey::of(&path, &meta);
-        if let Some(e) = lock(&self.inner.models).get_mut(&model_id)
-            && e.key == key
-        {
-            e.used = Instant::now();
-            return Ok(e.model.clone());
-        }
-        let model = tokio::task::spawn_blocking(move || Model::open(&path))
-            .await
-            .map_err(|e| RenderServiceError::Failed(e.to_string()))?
-            .map_err(|e| RenderServiceError::Lod(e.to_string()))?;
-        let mut dropped = Vec::new();
-        {
-            let mut models = lock(&self.inner.models);
-            if let Some(old) = models.remove(&model_id) {
-                dropped.push(old.model);
-            }
-            while models.len() >= MODELS {
-                let Some(oldest) = models.iter().min_by_key(|(_, e)| e.used).map(|(k, _)| *k)
-                else {
-                    break;
-                };
-                if let Some(old) = models.remove(&oldest) {
-                    dropped.push(old.model);
-                }
-            }
-            models.insert(
-                model_id,
-                ModelEntry {
-                    key,
-                    model: model.clone(),
-                    used: Instant::now(),
-                },
-            );
-        }
-        if let Ok(r) = self.renderer() {
-            for m in &dropped {
-                r.forget(m);
-            }
-        }
-        Ok(model)
-    }
-
-    /// Closes a model (deleted or rebuilt) and drops its patches from the cache.
-    pub fn forget_model(&self, model_id: i64) {
-        let old = lock(&self.inner.models).remove(&model_id);
-        if let (Some(old), Ok(r)) = (old, self.renderer()) {
-            r.forget(&old.model);
-        }
     }
 
     /// Admits a foreground (HTTP) render holding `bytes` (see [`Pool::admit`]).

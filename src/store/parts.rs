@@ -8,6 +8,7 @@ use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
 
 use super::models::double_option;
+use super::part_revisions::{self, Snapshot};
 use super::{Db, Result, StoreError, Tx};
 
 /// Kind of part.
@@ -138,6 +139,9 @@ pub struct NewPart {
     /// Thumbnail attachment.
     #[serde(default)]
     pub thumbnail_attachment_id: Option<i64>,
+    /// Comment of the creation, kept in the part's history.
+    #[serde(default)]
+    pub comment: Option<String>,
 }
 
 /// Changes to a part; `None` leaves a field as it is.
@@ -156,7 +160,13 @@ pub struct PartPatch {
     /// New thumbnail (`null` clears it).
     #[serde(default, with = "double_option")]
     pub thumbnail_attachment_id: Option<Option<i64>>,
+    /// Comment of the edit, kept in the part's history.
+    #[serde(default)]
+    pub comment: Option<String>,
 }
+
+/// Longest revision comment, in characters.
+pub const MAX_COMMENT_CHARS: usize = 2000;
 
 fn validate_center(c: &[f64; 3]) -> Result<()> {
     if c.iter().all(|v| v.is_finite()) {
@@ -168,14 +178,42 @@ fn validate_center(c: &[f64; 3]) -> Result<()> {
     }
 }
 
-/// Builds the vertex set, checking ids against the model's vertex count (when known).
-fn vertex_set(ids: &[u32], model_vertices: i64, limit: usize) -> Result<RoaringBitmap> {
-    if ids.len() > limit {
+/// Serialised form of a vertex set (RoaringBitmap's portable format, as parts and their
+/// revisions store it and `/api/v1/parts/{id}/vertices` serves it).
+pub fn serialize_vertex_set(set: &RoaringBitmap) -> Vec<u8> {
+    let mut out = Vec::with_capacity(set.serialized_size());
+    // Writing into a Vec cannot fail.
+    let _ = set.serialize_into(&mut out);
+    out
+}
+
+/// A stored vertex set (`None`: empty).
+pub fn parse_vertex_set(blob: Option<&[u8]>) -> Result<RoaringBitmap> {
+    match blob {
+        None => Ok(RoaringBitmap::new()),
+        Some(b) => RoaringBitmap::deserialize_from(b)
+            .map_err(|e| StoreError::Invalid(format!("stored vertex set unreadable: {e}"))),
+    }
+}
+
+/// Checks a vertex set against the part limit and the model's vertex count (when known).
+async fn check_vertex_set(
+    tx: &mut Tx,
+    model_id: i64,
+    set: &RoaringBitmap,
+    limit: usize,
+) -> Result<()> {
+    if set.len() > limit as u64 {
         return Err(StoreError::Invalid(format!(
-            "a part may hold at most {limit} vertices"
+            "a part may hold at most {limit} vertices; this one has {}",
+            set.len()
         )));
     }
-    let set: RoaringBitmap = ids.iter().copied().collect();
+    let model_vertices: i64 = sqlx::query_scalar("SELECT vertex_count FROM models WHERE id = ?")
+        .bind(model_id)
+        .fetch_optional(&mut **tx)
+        .await?
+        .ok_or(StoreError::NotFound("model"))?;
     if model_vertices > 0
         && let Some(max) = set.max()
         && i64::from(max) >= model_vertices
@@ -184,77 +222,229 @@ fn vertex_set(ids: &[u32], model_vertices: i64, limit: usize) -> Result<RoaringB
             "vertex id {max} is out of range: the model has {model_vertices} vertices"
         )));
     }
-    Ok(set)
+    Ok(())
 }
 
-fn serialize_set(set: &RoaringBitmap) -> Vec<u8> {
-    let mut out = Vec::with_capacity(set.serialized_size());
-    // Writing into a Vec cannot fail.
-    let _ = set.serialize_into(&mut out);
-    out
+/// A vertex set from a client's id list (at most `limit` ids before deduplication).
+fn set_of_ids(ids: &[u32], limit: usize) -> Result<RoaringBitmap> {
+    if ids.len() > limit {
+        return Err(StoreError::Invalid(format!(
+            "a part may hold at most {limit} vertices"
+        )));
+    }
+    Ok(ids.iter().copied().collect())
 }
 
-async fn model_vertices(tx: &mut Tx, model_id: i64) -> Result<i64> {
-    sqlx::query_scalar("SELECT vertex_count FROM models WHERE id = ?")
+/// What a change to a part is, for its revision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    /// A new part.
+    Create,
+    /// An edit through `PATCH /api/v1/parts/{id}`.
+    Edit,
+    /// A selection replaced the vertex set.
+    Replace,
+    /// A selection grew it.
+    Add,
+    /// A selection trimmed it.
+    Subtract,
+    /// The part was deleted (the revision keeps its last state).
+    Delete,
+}
+
+impl Action {
+    /// Name as stored.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Action::Create => "create",
+            Action::Edit => "edit",
+            Action::Replace => "replace",
+            Action::Add => "add",
+            Action::Subtract => "subtract",
+            Action::Delete => "delete",
+        }
+    }
+}
+
+/// Who made a change, how, and why: every write of a part carries one, and it becomes the
+/// part's revision (author, time, comment; the selection tool and view when a selection made
+/// it) and its audit entry.
+#[derive(Debug, Clone, Default)]
+pub struct Provenance {
+    /// Author.
+    pub user_id: i64,
+    /// The author's comment.
+    pub comment: Option<String>,
+    /// Selection tool (`lasso`, `markup`, `heavy_lasso`, `point`), if a selection made it.
+    pub tool: Option<String>,
+    /// The view the selection was made from.
+    pub view: Option<serde_json::Value>,
+}
+
+impl Provenance {
+    /// A change by `user_id` with an optional comment.
+    pub fn by(user_id: i64, comment: Option<String>) -> Provenance {
+        Provenance {
+            user_id,
+            comment,
+            ..Provenance::default()
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        if let Some(c) = &self.comment
+            && c.chars().count() > MAX_COMMENT_CHARS
+        {
+            return Err(StoreError::Invalid(format!(
+                "a comment may have at most {MAX_COMMENT_CHARS} characters"
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The full state of a part as written: the one row image every write path produces.
+#[derive(Debug, Clone)]
+pub struct PartState {
+    /// Point or region.
+    pub kind: PartKind,
+    /// Centre.
+    pub center: [f64; 3],
+    /// Vertex set.
+    pub vertices: RoaringBitmap,
+    /// Preferred camera.
+    pub camera: Option<Camera>,
+    /// Thumbnail attachment.
+    pub thumbnail_attachment_id: Option<i64>,
+}
+
+impl PartState {
+    fn validate(&self) -> Result<()> {
+        validate_center(&self.center)?;
+        if let Some(c) = &self.camera {
+            c.validate()?;
+        }
+        if self.kind == PartKind::Region && self.vertices.is_empty() {
+            return Err(StoreError::Invalid(
+                "a region part needs a non-empty vertex set".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn camera_json(c: &Option<Camera>) -> Option<String> {
+    c.map(|c| serde_json::to_string(&c).unwrap_or_default())
+}
+
+/// Inserts or updates the row of a part (`id`: `None` inserts) with `state`, appends its
+/// revision and its audit entry, all in `tx`. The one writer of `parts`' user-facing columns.
+async fn write_tx(
+    tx: &mut Tx,
+    id: Option<i64>,
+    model_id: i64,
+    state: &PartState,
+    action: Action,
+    prov: &Provenance,
+    limit: usize,
+) -> Result<i64> {
+    state.validate()?;
+    prov.validate()?;
+    check_vertex_set(tx, model_id, &state.vertices, limit).await?;
+    let blob = (!state.vertices.is_empty()).then(|| serialize_vertex_set(&state.vertices));
+    let camera = camera_json(&state.camera);
+    let now = crate::now_rfc3339();
+    let count = state.vertices.len() as i64;
+    let thumbnail_missing = "thumbnail attachment does not exist";
+    let id = match id {
+        None => sqlx::query_scalar(
+            "INSERT INTO parts (model_id, kind, center_x, center_y, center_z, vertex_count,
+             vertex_set, camera, thumbnail_attachment_id, created_by, created_at, updated_at)
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING id",
+        )
         .bind(model_id)
-        .fetch_optional(&mut **tx)
-        .await?
-        .ok_or(StoreError::NotFound("model"))
+        .bind(state.kind)
+        .bind(state.center[0])
+        .bind(state.center[1])
+        .bind(state.center[2])
+        .bind(count)
+        .bind(&blob)
+        .bind(&camera)
+        .bind(state.thumbnail_attachment_id)
+        .bind(prov.user_id)
+        .bind(&now)
+        .bind(&now)
+        .fetch_one(&mut **tx)
+        .await
+        .map_err(|e| StoreError::map_constraint(e, "", thumbnail_missing))?,
+        Some(id) => {
+            sqlx::query(
+                "UPDATE parts SET kind = ?, center_x = ?, center_y = ?, center_z = ?,
+                 vertex_count = ?, vertex_set = ?, camera = ?, thumbnail_attachment_id = ?,
+                 updated_at = ? WHERE id = ?",
+            )
+            .bind(state.kind)
+            .bind(state.center[0])
+            .bind(state.center[1])
+            .bind(state.center[2])
+            .bind(count)
+            .bind(&blob)
+            .bind(&camera)
+            .bind(state.thumbnail_attachment_id)
+            .bind(&now)
+            .bind(id)
+            .execute(&mut **tx)
+            .await
+            .map_err(|e| StoreError::map_constraint(e, "", thumbnail_missing))?;
+            id
+        }
+    };
+    let snapshot = Snapshot {
+        part_id: id,
+        model_id,
+        kind: state.kind,
+        center: state.center,
+        vertex_count: count,
+        vertex_set: blob.as_deref(),
+        camera: camera.as_deref(),
+    };
+    part_revisions::record_tx(tx, &snapshot, action.as_str(), prov).await?;
+    let audit = if action == Action::Create {
+        "part.create"
+    } else {
+        "part.update"
+    };
+    super::audit::record(
+        tx,
+        Some(prov.user_id),
+        audit,
+        "part",
+        Some(id),
+        serde_json::json!({"model_id": model_id, "kind": state.kind, "vertex_count": count,
+                           "action": action.as_str(), "tool": prov.tool}),
+    )
+    .await?;
+    Ok(id)
 }
 
-/// Creates a part on model `model_id`.
+/// Creates a part on model `model_id` with `state` (revision 1). A part without a camera or
+/// thumbnail gets the server's best view and thumbnail in the background.
 pub async fn create(
     db: &Db,
     model_id: i64,
-    new: &NewPart,
-    user_id: i64,
+    state: &PartState,
+    prov: &Provenance,
     max_vertices: usize,
 ) -> Result<Part> {
-    validate_center(&new.center)?;
-    if let Some(c) = &new.camera {
-        c.validate()?;
-    }
-    let ids = new.vertex_ids.as_deref().unwrap_or(&[]);
-    if new.kind == PartKind::Region && ids.is_empty() {
-        return Err(StoreError::Invalid(
-            "a region part needs a non-empty vertex_ids array".into(),
-        ));
-    }
     let mut tx = db.begin().await?;
-    let model_vertices = model_vertices(&mut tx, model_id).await?;
-    let set = vertex_set(ids, model_vertices, max_vertices)?;
-    let blob = (!set.is_empty()).then(|| serialize_set(&set));
-    let camera = new
-        .camera
-        .map(|c| serde_json::to_string(&Camera { auto: false, ..c }).unwrap_or_default());
-    let now = crate::now_rfc3339();
-    let id: i64 = sqlx::query_scalar(
-        "INSERT INTO parts (model_id, kind, center_x, center_y, center_z, vertex_count, vertex_set,
-         camera, thumbnail_attachment_id, created_by, created_at, updated_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING id",
-    )
-    .bind(model_id)
-    .bind(new.kind)
-    .bind(new.center[0])
-    .bind(new.center[1])
-    .bind(new.center[2])
-    .bind(set.len() as i64)
-    .bind(blob)
-    .bind(camera)
-    .bind(new.thumbnail_attachment_id)
-    .bind(user_id)
-    .bind(&now)
-    .bind(&now)
-    .fetch_one(&mut *tx)
-    .await
-    .map_err(|e| StoreError::map_constraint(e, "", "thumbnail attachment does not exist"))?;
-    super::audit::record(
+    let id = write_tx(
         &mut tx,
-        Some(user_id),
-        "part.create",
-        "part",
-        Some(id),
-        serde_json::json!({"model_id": model_id, "kind": new.kind, "vertex_count": set.len()}),
+        None,
+        model_id,
+        state,
+        Action::Create,
+        prov,
+        max_vertices,
     )
     .await?;
     let part = get_tx(&mut tx, id).await?;
@@ -309,110 +499,139 @@ pub async fn vertices(db: &Db, id: i64) -> Result<Vec<u8>> {
     match blob {
         None => Err(StoreError::NotFound("part")),
         Some(Some(b)) => Ok(b),
-        Some(None) => Ok(serialize_set(&RoaringBitmap::new())),
+        Some(None) => Ok(serialize_vertex_set(&RoaringBitmap::new())),
     }
 }
 
-/// Applies `patch` to part `id`.
+/// The state of a new part from the API's fields.
+pub fn state_of_new(new: &NewPart, max_vertices: usize) -> Result<PartState> {
+    let ids = new.vertex_ids.as_deref().unwrap_or(&[]);
+    if new.kind == PartKind::Region && ids.is_empty() {
+        return Err(StoreError::Invalid(
+            "a region part needs a non-empty vertex_ids array".into(),
+        ));
+    }
+    Ok(PartState {
+        kind: new.kind,
+        center: new.center,
+        vertices: set_of_ids(ids, max_vertices)?,
+        camera: new.camera.map(|c| Camera { auto: false, ..c }),
+        thumbnail_attachment_id: new.thumbnail_attachment_id,
+    })
+}
+
+/// The current state of part `id` in `tx`, with its model.
+async fn state_tx(tx: &mut Tx, id: i64) -> Result<(Part, PartState)> {
+    let part = get_tx(tx, id).await?;
+    let blob: Option<Vec<u8>> = sqlx::query_scalar("SELECT vertex_set FROM parts WHERE id = ?")
+        .bind(id)
+        .fetch_one(&mut **tx)
+        .await?;
+    let state = PartState {
+        kind: part.kind,
+        center: part.center,
+        vertices: parse_vertex_set(blob.as_deref())?,
+        camera: part.camera,
+        thumbnail_attachment_id: part.thumbnail_attachment_id,
+    };
+    Ok((part, state))
+}
+
+/// Changes part `id`: `change` maps its current state to the new one. With
+/// `expected_updated_at`, the part must be unchanged since then (else
+/// [`StoreError::Conflict`]). A new vertex set drops a server-computed camera and the
+/// thumbnail unless `change` set them, so the server renders them again for the new region.
 pub async fn update(
     db: &Db,
     id: i64,
-    patch: &PartPatch,
-    user_id: i64,
+    action: Action,
+    change: impl FnOnce(&mut PartState) -> Result<()>,
+    expected_updated_at: Option<&str>,
+    prov: &Provenance,
     max_vertices: usize,
 ) -> Result<Part> {
-    if let Some(c) = &patch.center {
-        validate_center(c)?;
-    }
-    if let Some(Some(c)) = &patch.camera {
-        c.validate()?;
-    }
     let mut tx = db.begin().await?;
-    let mut part = get_tx(&mut tx, id).await?;
-    if let Some(k) = patch.kind {
-        part.kind = k;
+    let (part, before) = state_tx(&mut tx, id).await?;
+    if let Some(expected) = expected_updated_at
+        && part.updated_at != expected
+    {
+        return Err(StoreError::Conflict(format!(
+            "part {id} changed since this selection was made (at {}); select again on its \
+             current state",
+            part.updated_at
+        )));
     }
-    if let Some(c) = patch.center {
-        part.center = c;
-    }
-    if let Some(c) = patch.camera {
-        part.camera = c.map(|c| Camera { auto: false, ..c });
-    }
-    if let Some(t) = patch.thumbnail_attachment_id {
-        part.thumbnail_attachment_id = t;
-    }
-    if let Some(ids) = &patch.vertex_ids {
-        // A new region gets a new best view (unless its camera came from a client) and a new
-        // thumbnail (unless this patch sets one); the server renders them in the background.
-        if patch.camera.is_none() && part.camera.is_some_and(|c| c.auto) {
-            part.camera = None;
+    let mut after = before.clone();
+    change(&mut after)?;
+    if after.vertices != before.vertices {
+        if after.camera == before.camera && before.camera.is_some_and(|c| c.auto) {
+            after.camera = None;
         }
-        if patch.thumbnail_attachment_id.is_none() {
-            part.thumbnail_attachment_id = None;
+        if after.thumbnail_attachment_id == before.thumbnail_attachment_id {
+            after.thumbnail_attachment_id = None;
         }
-        let model_vertices = model_vertices(&mut tx, part.model_id).await?;
-        let set = vertex_set(ids, model_vertices, max_vertices)?;
-        part.vertex_count = set.len() as i64;
-        sqlx::query("UPDATE parts SET vertex_set = ?, vertex_count = ? WHERE id = ?")
-            .bind((!set.is_empty()).then(|| serialize_set(&set)))
-            .bind(part.vertex_count)
-            .bind(id)
-            .execute(&mut *tx)
-            .await?;
     }
-    if part.kind == PartKind::Region && part.vertex_count == 0 {
-        return Err(StoreError::Invalid(
-            "a region part needs a non-empty vertex set".into(),
-        ));
-    }
-    part.updated_at = crate::now_rfc3339();
-    sqlx::query(
-        "UPDATE parts SET kind = ?, center_x = ?, center_y = ?, center_z = ?, camera = ?,
-         thumbnail_attachment_id = ?, updated_at = ? WHERE id = ?",
-    )
-    .bind(part.kind)
-    .bind(part.center[0])
-    .bind(part.center[1])
-    .bind(part.center[2])
-    .bind(
-        part.camera
-            .map(|c| serde_json::to_string(&c).unwrap_or_default()),
-    )
-    .bind(part.thumbnail_attachment_id)
-    .bind(&part.updated_at)
-    .bind(id)
-    .execute(&mut *tx)
-    .await
-    .map_err(|e| StoreError::map_constraint(e, "", "thumbnail attachment does not exist"))?;
-    super::audit::record(
+    write_tx(
         &mut tx,
-        Some(user_id),
-        "part.update",
-        "part",
         Some(id),
-        serde_json::json!({
-            "kind": patch.kind,
-            "center": patch.center,
-            "vertices_changed": patch.vertex_ids.is_some(),
-        }),
+        part.model_id,
+        &after,
+        action,
+        prov,
+        max_vertices,
     )
     .await?;
+    let part = get_tx(&mut tx, id).await?;
     tx.commit().await?;
     Ok(part)
 }
 
-/// Deletes a part and its assignments (the contents stay).
-pub async fn delete(db: &Db, id: i64, user_id: i64) -> Result<()> {
+/// Applies an API patch to `state`.
+pub fn apply_patch(state: &mut PartState, patch: &PartPatch, max_vertices: usize) -> Result<()> {
+    if let Some(k) = patch.kind {
+        state.kind = k;
+    }
+    if let Some(c) = patch.center {
+        state.center = c;
+    }
+    if let Some(c) = patch.camera {
+        state.camera = c.map(|c| Camera { auto: false, ..c });
+    }
+    if let Some(t) = patch.thumbnail_attachment_id {
+        state.thumbnail_attachment_id = t;
+    }
+    if let Some(ids) = &patch.vertex_ids {
+        state.vertices = set_of_ids(ids, max_vertices)?;
+    }
+    Ok(())
+}
+
+/// Deletes a part and its assignments (the contents stay); its history keeps a `delete`
+/// revision with its last state.
+pub async fn delete(db: &Db, id: i64, prov: &Provenance) -> Result<Part> {
+    prov.validate()?;
     let mut tx = db.begin().await?;
-    let part = get_tx(&mut tx, id).await?;
+    let (part, state) = state_tx(&mut tx, id).await?;
+    let blob = (!state.vertices.is_empty()).then(|| serialize_vertex_set(&state.vertices));
+    let camera = camera_json(&state.camera);
     super::changes::push_part(&mut tx, id).await?;
     sqlx::query("DELETE FROM parts WHERE id = ?")
         .bind(id)
         .execute(&mut *tx)
         .await?;
+    let snapshot = Snapshot {
+        part_id: id,
+        model_id: part.model_id,
+        kind: part.kind,
+        center: part.center,
+        vertex_count: part.vertex_count,
+        vertex_set: blob.as_deref(),
+        camera: camera.as_deref(),
+    };
+    part_revisions::record_tx(&mut tx, &snapshot, Action::Delete.as_str(), prov).await?;
     super::audit::record(
         &mut tx,
-        Some(user_id),
+        Some(prov.user_id),
         "part.delete",
         "part",
         Some(id),
@@ -420,7 +639,7 @@ pub async fn delete(db: &Db, id: i64, user_id: i64) -> Result<()> {
     )
     .await?;
     tx.commit().await?;
-    Ok(())
+    Ok(part)
 }
 
 /// Parts that lack a camera or a thumbnail, on ready models (all of them, or those of

@@ -5,8 +5,8 @@ use actix_web::{HttpResponse, web};
 use serde::Deserialize;
 
 use super::auth::Auth;
-use super::events::{Event, EventKind};
 use super::{ApiError, AppState};
+use crate::app::events::{Event, EventKind};
 use crate::store::assignments;
 use crate::store::contents;
 use crate::store::users::Role;

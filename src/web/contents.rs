@@ -6,8 +6,8 @@ use actix_web::{HttpResponse, web};
 use serde::{Deserialize, Serialize};
 
 use super::auth::Auth;
-use super::events::{Event, EventKind};
 use super::{ApiError, AppState, PageQuery};
+use crate::app::events::{Event, EventKind};
 use crate::store::attachments::{self, Attachment};
 use crate::store::contents::{self, Content, ContentEdit, Revision};
 use crate::store::models::double_option;

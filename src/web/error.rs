@@ -8,6 +8,7 @@ use actix_web::{HttpRequest, HttpResponse, ResponseError};
 use askama::Template;
 use serde_json::json;
 
+use crate::app::AppError;
 use crate::search::SearchError;
 use crate::store::StoreError;
 use crate::store::contents::{ContentEdit, Revision};
@@ -163,6 +164,27 @@ impl ResponseError for ApiError {
             resp.insert_header((header::WWW_AUTHENTICATE, "Cookie realm=\"meshwiki\""));
         }
         resp.json(body)
+    }
+}
+
+impl From<AppError> for ApiError {
+    fn from(e: AppError) -> ApiError {
+        match e {
+            AppError::NotFound(m) => ApiError::NotFound(m),
+            AppError::Invalid(m) => ApiError::BadRequest(m),
+            AppError::Conflict(m) => ApiError::Conflict(m),
+            AppError::UnsupportedMedia(m) => ApiError::UnsupportedMediaType(m),
+            AppError::TooLarge(m) => ApiError::PayloadTooLarge(m),
+            AppError::Store(e) => e.into(),
+            AppError::Render(e) => e.into(),
+            AppError::Internal(m) => ApiError::Internal(m),
+        }
+    }
+}
+
+impl From<AppError> for PageError {
+    fn from(e: AppError) -> PageError {
+        PageError::Api(e.into())
     }
 }
 

@@ -3,14 +3,11 @@
 //! (304) and single byte ranges (206; 416 when unsatisfiable; a malformed or multiple range is
 //! ignored: 200). Anyone logged in reads.
 //!
-//! Open files live in a small registry ([`LodRegistry`]) keyed by model id and checked
-//! against the file on disk (device, inode, size, modification time) on every request, so a
-//! rebuilt model is reopened; memory maps of replaced files stay valid until dropped.
+//! Files are opened through the application's model registry ([`crate::app::models`]), shared
+//! with rendering and selection: a rebuilt model is reopened; memory maps of replaced files
+//! stay valid until dropped.
 
-use std::collections::HashMap;
-use std::path::{Component, Path, PathBuf};
-use std::sync::{Arc, Mutex, OnceLock};
-use std::time::{Instant, SystemTime};
+use std::sync::Arc;
 
 use actix_web::body::SizedStream;
 use actix_web::http::{StatusCode, header};
@@ -20,10 +17,8 @@ use serde::{Deserialize, Serialize};
 
 use super::auth::Auth;
 use super::{ApiError, AppState};
-use crate::store::models::{self, ModelStatus};
+use crate::app::models::{OpenModel, Purpose};
 
-/// Open LOD files kept at most.
-const REGISTRY_SIZE: usize = 32;
 /// Bodies up to this size are copied in one piece; larger ones stream.
 const SMALL_BODY: usize = 1 << 20;
 /// Chunk of a streamed body.
@@ -42,144 +37,8 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
         .service(super::resource("/api/v1/models/{id}/lod/file").route(web::get().to(file)));
 }
 
-/// Identity of a file on disk.
-#[derive(Debug, Clone, PartialEq, Eq)]
-struct FileKey {
-    path: PathBuf,
-    len: u64,
-    modified: Option<SystemTime>,
-    dev: u64,
-    ino: u64,
-}
-
-impl FileKey {
-    fn of(path: &Path, m: &std::fs::Metadata) -> FileKey {
-        #[cfg(unix)]
-        let (dev, ino) = {
-            use std::os::unix::fs::MetadataExt;
-            (m.dev(), m.ino())
-        };
-        #[cfg(not(unix))]
-        let (dev, ino) = (0, 0);
-        FileKey {
-            path: path.to_path_buf(),
-            len: m.len(),
-            modified: m.modified().ok(),
-            dev,
-            ino,
-        }
-    }
-}
-
-/// An open LOD file with its ETag and (once asked for) its JSON encoding.
-pub struct OpenLod {
-    /// The mapped file.
-    pub lod: LodFile,
-    /// Quoted ETag of the whole file (header checksum and size).
-    pub etag: String,
-    json: OnceLock<web::Bytes>,
-}
-
-struct Entry {
-    key: FileKey,
-    open: Arc<OpenLod>,
-    used: Instant,
-}
-
-/// Open LOD files by model id (see the module documentation).
-#[derive(Clone, Default)]
-pub struct LodRegistry {
-    inner: Arc<Mutex<HashMap<i64, Entry>>>,
-}
-
-impl std::fmt::Debug for LodRegistry {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let n = self.inner.lock().map(|m| m.len()).unwrap_or(0);
-        f.debug_struct("LodRegistry").field("open", &n).finish()
-    }
-}
-
 fn lod_error(e: FormatError) -> ApiError {
     ApiError::internal(format!("LOD file unreadable: {e}"))
-}
-
-impl LodRegistry {
-    /// Drops the open file of a model (it is reopened on the next request).
-    pub fn forget(&self, model_id: i64) {
-        if let Ok(mut m) = self.inner.lock() {
-            m.remove(&model_id);
-        }
-    }
-
-    /// The open LOD file of a ready model: 404 for an unknown model, 409 while it is not
-    /// ready (pending, building or failed).
-    pub async fn get(&self, state: &AppState, model_id: i64) -> Result<Arc<OpenLod>, ApiError> {
-        let model = models::get(&state.db, model_id).await?;
-        match model.status {
-            ModelStatus::Ready => {}
-            ModelStatus::Pending | ModelStatus::Building => {
-                return Err(ApiError::Conflict(format!(
-                    "model {model_id} is {}: its LOD hierarchy is not built yet; try again \
-                     when its status is ready",
-                    model.status.as_str()
-                )));
-            }
-            ModelStatus::Failed => {
-                return Err(ApiError::Conflict(format!(
-                    "model {model_id} has no LOD hierarchy: its build failed: {}",
-                    model.error.as_deref().unwrap_or("unknown error")
-                )));
-            }
-        }
-        let rel = model
-            .lod_path
-            .as_deref()
-            .filter(|p| {
-                let p = Path::new(p);
-                p.components().count() >= 2
-                    && p.components().all(|c| matches!(c, Component::Normal(_)))
-            })
-            .ok_or_else(|| ApiError::Conflict(format!("model {model_id} has no LOD file")))?;
-        let path = state.settings.data_dir.join(rel);
-        let meta = tokio::fs::metadata(&path)
-            .await
-            .map_err(|e| ApiError::internal(format!("LOD file {} missing: {e}", path.display())))?;
-        let key = FileKey::of(&path, &meta);
-        if let Ok(mut m) = self.inner.lock()
-            && let Some(e) = m.get_mut(&model_id)
-            && e.key == key
-        {
-            e.used = Instant::now();
-            return Ok(e.open.clone());
-        }
-        let lod = web::block(move || LodFile::open(&path))
-            .await
-            .map_err(ApiError::internal)?
-            .map_err(lod_error)?;
-        let h = lod.header();
-        let open = Arc::new(OpenLod {
-            etag: format!("\"{:08x}-{:x}\"", h.header_crc, lod.bytes().len()),
-            lod,
-            json: OnceLock::new(),
-        });
-        if let Ok(mut m) = self.inner.lock() {
-            if m.len() >= REGISTRY_SIZE
-                && !m.contains_key(&model_id)
-                && let Some(oldest) = m.iter().min_by_key(|(_, e)| e.used).map(|(k, _)| *k)
-            {
-                m.remove(&oldest);
-            }
-            m.insert(
-                model_id,
-                Entry {
-                    key,
-                    open: open.clone(),
-                    used: Instant::now(),
-                },
-            );
-        }
-        Ok(open)
-    }
 }
 
 // ---- JSON encoding -------------------------------------------------------------------------
@@ -405,7 +264,7 @@ pub fn parse_range(value: Option<&str>, len: u64) -> Result<Option<ByteRange>, B
 /// and `Range`.
 fn serve_bytes(
     req: &HttpRequest,
-    open: Arc<OpenLod>,
+    open: Arc<OpenModel>,
     start: usize,
     end: usize,
     etag: &str,
@@ -494,7 +353,7 @@ async fn hierarchy(
             )));
         }
     };
-    let open = state.lods.get(&state, *id).await?;
+    let open = state.models.open(&state.db, *id, Purpose::Serve).await?;
     if binary {
         let end = open.lod.header().blobs_offset as usize;
         let etag = open.etag.clone();
@@ -532,7 +391,7 @@ async fn patch(
     path: web::Path<(i64, u32)>,
 ) -> Result<HttpResponse, ApiError> {
     let (id, node) = path.into_inner();
-    let open = state.lods.get(&state, id).await?;
+    let open = state.models.open(&state.db, id, Purpose::Serve).await?;
     let count = open.lod.header().node_count;
     let record = *open.lod.node(node).map_err(|_| {
         ApiError::NotFound(format!(
@@ -553,7 +412,7 @@ async fn file(
     req: HttpRequest,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
-    let open = state.lods.get(&state, *id).await?;
+    let open = state.models.open(&state.db, *id, Purpose::Serve).await?;
     let end = open.lod.bytes().len();
     let etag = open.etag.clone();
     Ok(serve_bytes(&req, open, 0, end, &etag, REVALIDATE))

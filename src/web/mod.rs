@@ -23,7 +23,6 @@ pub mod users;
 pub mod vendor;
 
 use std::net::SocketAddr;
-use std::sync::Arc;
 use std::time::Instant;
 
 use actix_web::body::MessageBody;
@@ -32,100 +31,12 @@ use actix_web::middleware::{self, DefaultHeaders, Next};
 use actix_web::{App, HttpRequest, HttpServer, web};
 use serde::Deserialize;
 
-use crate::config::Settings;
-use crate::search::{SearchError, SearchIndex};
-use crate::store::{Db, Page, StoreError};
+use crate::store::Page;
 pub use error::{ApiError, PageError};
 
-/// Shared state of every request. A plain struct: add fields as the server grows.
-#[derive(Debug, Clone)]
-pub struct AppState {
-    /// The database.
-    pub db: Db,
-    /// The search index.
-    pub search: SearchIndex,
-    /// Settings.
-    pub settings: Arc<Settings>,
-    /// Change events for live viewers (`/api/v1/models/{id}/events`).
-    pub events: events::Events,
-    /// Background builds (uploads, demo model).
-    pub jobs: crate::jobs::Jobs,
-    /// Open LOD files of ready models.
-    pub lods: lod::LodRegistry,
-    /// Server-side rendering: GPU device, patch cache, bounded worker pool.
-    pub render: crate::render::RenderService,
-    /// Draft region selections of every user (`/api/v1/models/{id}/selections`).
-    pub selections: selections::Drafts,
-    /// Failed logins, for back-off.
-    pub logins: crate::throttle::LoginThrottle,
-}
-
-/// Why the server could not start.
-#[derive(Debug, thiserror::Error)]
-pub enum StartError {
-    /// The data directory could not be prepared.
-    #[error("cannot prepare data directory {path}: {source}")]
-    DataDir {
-        /// The directory.
-        path: String,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// The database could not be opened or migrated.
-    #[error("cannot open database: {0}")]
-    Store(#[from] StoreError),
-    /// The search index could not be opened.
-    #[error("cannot open search index: {0}")]
-    Search(#[from] SearchError),
-}
-
-impl AppState {
-    /// Prepares the data directory, opens the database (migrating it) and the search index
-    /// (catching it up with the database).
-    pub async fn open(settings: Settings) -> Result<AppState, StartError> {
-        settings
-            .ensure_dirs()
-            .map_err(|source| StartError::DataDir {
-                path: settings.data_dir.display().to_string(),
-                source,
-            })?;
-        let db = Db::open(&settings.db_path()).await?;
-        let search = SearchIndex::open(&settings.index_dir(), &db).await?;
-        let settings = Arc::new(settings);
-        // Opening the GPU device blocks for a moment.
-        let render_settings = settings.render.clone();
-        let render = tokio::task::spawn_blocking(move || {
-            crate::render::RenderService::shared(&render_settings)
-        })
-        .await
-        .unwrap_or_else(|e| {
-            tracing::error!(error = %e, "opening the render device crashed");
-            crate::render::RenderService::open(&crate::config::RenderSettings {
-                adapter: "none".into(),
-                ..settings.render.clone()
-            })
-        });
-        Ok(AppState {
-            render,
-            selections: selections::Drafts::default(),
-            logins: crate::throttle::LoginThrottle::default(),
-            jobs: crate::jobs::Jobs::new(db.clone(), settings.clone(), Some(search.clone())),
-            lods: lod::LodRegistry::default(),
-            db,
-            search,
-            settings,
-            events: events::Events::new(),
-        })
-    }
-
-    /// Brings the search index up to date after a committed change. A failure is logged,
-    /// not returned: the change is durable and the index catches up on the next sync.
-    pub async fn sync_search(&self) {
-        if let Err(e) = self.search.sync(&self.db).await {
-            tracing::error!(error = %e, "search index update failed; will retry");
-        }
-    }
-}
+/// Shared state of every request: the application (handlers call its use cases).
+pub type AppState = crate::app::App;
+pub use crate::app::StartError;
 
 /// `limit` / `offset` query parameters of list routes.
 #[derive(Debug, Clone, Copy, Default, Deserialize)]
@@ -258,20 +169,11 @@ pub async fn run(state: AppState, on_bound: impl FnOnce(&[SocketAddr])) -> std::
     // Event streams never finish on their own: do not wait 30 s for them on shutdown.
     server = server.shutdown_timeout(5);
     let server = server.bind(&settings.bind)?;
-    // Background builds: crash recovery, then the workers (stopped, and their jobs queued
-    // again, when the server stops).
-    state.jobs.start().await.map_err(std::io::Error::other)?;
-    // Best views and thumbnails of parts, in the background.
-    let _views = crate::render::views::PartViews::start(
-        state.db.clone(),
-        state.settings.clone(),
-        state.render.clone(),
-        state.events.clone(),
-        &state.jobs,
-    );
+    // Background work: crash recovery and the build workers (stopped, and their jobs queued
+    // again, when the server stops), best views and thumbnails of parts.
+    let _background = state.start().await.map_err(std::io::Error::other)?;
     on_bound(&server.addrs());
     let result = server.run().await;
-    state.jobs.shutdown().await;
-    state.db.close().await;
+    state.shutdown().await;
     result
 }

@@ -73,7 +73,7 @@ async fn delete(
     // A build still running for this model stops (and leaves nothing behind).
     state.jobs.cancel_for_model(*id, Some(auth.id())).await?;
     let model = models::delete(&state.db, *id, auth.id()).await?;
-    state.lods.forget(model.id);
+    state.models.forget(model.id);
     state.sync_search().await;
     if let Some(lod) = &model.lod_path {
         remove_model_file(&state.settings, lod).await;

@@ -4,7 +4,6 @@
 use actix_web::{HttpResponse, http::header, web};
 
 use super::auth::Auth;
-use super::events::{Event, EventKind};
 use super::{ApiError, AppState};
 use crate::store::models;
 use crate::store::parts::{self, NewPart, PartPatch};
@@ -42,11 +41,7 @@ async fn create(
     body: web::Json<NewPart>,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Editor)?;
-    let limit = state.settings.limits.part_vertices;
-    let part = parts::create(&state.db, *model_id, &body, auth.id(), limit).await?;
-    state
-        .events
-        .publish(Event::part(EventKind::PartCreated, part.model_id, part.id));
+    let part = state.create_part(auth.id(), *model_id, &body).await?;
     Ok(HttpResponse::Created().json(part))
 }
 
@@ -65,11 +60,7 @@ async fn update(
     body: web::Json<PartPatch>,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Editor)?;
-    let limit = state.settings.limits.part_vertices;
-    let part = parts::update(&state.db, *id, &body, auth.id(), limit).await?;
-    state
-        .events
-        .publish(Event::part(EventKind::PartUpdated, part.model_id, part.id));
+    let part = state.edit_part(auth.id(), *id, &body).await?;
     Ok(HttpResponse::Ok().json(part))
 }
 
@@ -79,12 +70,7 @@ async fn delete(
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Editor)?;
-    let model_id = parts::get(&state.db, *id).await?.model_id;
-    parts::delete(&state.db, *id, auth.id()).await?;
-    state.sync_search().await;
-    state
-        .events
-        .publish(Event::part(EventKind::PartDeleted, model_id, *id));
+    state.delete_part(auth.id(), *id, None).await?;
     Ok(HttpResponse::NoContent().finish())
 }
 

@@ -53,9 +53,9 @@ use serde_json::json;
 
 use super::auth::Auth;
 use super::{ApiError, AppState};
+use crate::app::models::Purpose;
 use crate::config::RenderSettings;
 use crate::render::{MemoryHold, PoolError, RenderService, RenderServiceError};
-use crate::store::models::{self, ModelStatus};
 use crate::store::{assignments, parts};
 
 /// Magic of the buffers body.
@@ -384,37 +384,6 @@ fn camera_json(c: &Camera) -> serde_json::Value {
            "fovy": c.fovy_deg, "width": c.width, "height": c.height})
 }
 
-/// The LOD file of a ready model: 404 unknown, 409 not ready.
-async fn ready_model(state: &AppState, model_id: i64) -> Result<std::path::PathBuf, ApiError> {
-    let model = models::get(&state.db, model_id).await?;
-    match model.status {
-        ModelStatus::Ready => {}
-        ModelStatus::Pending | ModelStatus::Building => {
-            return Err(ApiError::Conflict(format!(
-                "model {model_id} is {}: it can be rendered once its status is ready",
-                model.status.as_str()
-            )));
-        }
-        ModelStatus::Failed => {
-            return Err(ApiError::Conflict(format!(
-                "model {model_id} cannot be rendered: its build failed: {}",
-                model.error.as_deref().unwrap_or("unknown error")
-            )));
-        }
-    }
-    let rel = model
-        .lod_path
-        .as_deref()
-        .filter(|p| {
-            let p = std::path::Path::new(p);
-            p.components().count() >= 2
-                && p.components()
-                    .all(|c| matches!(c, std::path::Component::Normal(_)))
-        })
-        .ok_or_else(|| ApiError::Conflict(format!("model {model_id} has no LOD file")))?;
-    Ok(state.settings.data_dir.join(rel))
-}
-
 /// Checks that every named part is on the model; returns the bytes of their vertex sets.
 async fn check_parts(state: &AppState, model_id: i64, ids: &[i64]) -> Result<u64, ApiError> {
     let mut bytes = 0u64;
@@ -437,7 +406,7 @@ async fn load_sets(state: &AppState, ids: &[i64]) -> Result<Vec<(i64, RoaringBit
     let mut out = Vec::with_capacity(ids.len());
     for &id in ids {
         let blob = parts::vertex_set_raw(&state.db, id).await?;
-        let set = crate::render::views::vertex_set(blob.as_deref())
+        let set = parts::parse_vertex_set(blob.as_deref())
             .map_err(|e| ApiError::internal(format!("part {id}: {e}")))?;
         out.push((id, set));
     }
@@ -566,9 +535,12 @@ async fn prepare(
     let service = state.render.clone();
     let params = Params::parse(q, route, service.settings())?;
     service.renderer()?;
-    let path = ready_model(state, model_id).await?;
+    let open = state
+        .models
+        .open(&state.db, model_id, Purpose::Render)
+        .await?;
     let set_bytes = check_parts(state, model_id, &params.named()).await?;
-    let model = service.model(model_id, path).await?;
+    let model = open.render.clone();
     let camera = params.camera(&model)?;
     Ok(Prepared {
         service,

@@ -1,4 +1,4 @@
-//! The command line: `user add`, `reindex`, `bench search` (small), and `demo`.
+//! The command line: `user add`, `reindex`, `demo`, and that benchmarks are not in it.
 
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
@@ -78,35 +78,6 @@ fn reindex_rebuilds_the_index() {
         admin.get("/api/v1/search?q=ossuary").json()[0]["id"],
         c["id"]
     );
-}
-
-#[test]
-fn bench_search_prints_figures() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(BIN)
-        .args([
-            "bench",
-            "search",
-            "--docs",
-            "2000",
-            "--queries",
-            "50",
-            "--data-dir",
-        ])
-        .arg(dir.path())
-        .env("MESHWIKI_LOG", "warn")
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(stdout.contains("index build:"), "{stdout}");
-    assert!(stdout.contains("p50") && stdout.contains("p99"), "{stdout}");
-    // The scratch directory is removed.
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
 
 #[test]
@@ -216,4 +187,16 @@ fn demo_prints_credentials_seeds_and_serves() {
     );
     child.kill().unwrap();
     let _ = child.wait();
+}
+
+#[test]
+fn the_product_binary_has_no_benchmarks() {
+    let out = Command::new(BIN)
+        .args(["bench", "search"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let help = Command::new(BIN).arg("--help").output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    assert!(help.contains("serve") && !help.contains("bench"), "{help}");
 }

@@ -225,3 +225,97 @@ fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
         }
     }
 }
+
+/// Every change of a part through `/api/v1/parts` is in its history, with its author,
+/// comment and state; a deleted part keeps its history.
+#[test]
+fn parts_edited_through_the_api_keep_their_history() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let erin = create_user(&server, &admin, "erin", "editor");
+    let paula = create_user(&server, &admin, "paula", "editor");
+    let model = admin
+        .post("/api/v1/models", &json!({"title": "Stele"}))
+        .json();
+    let mid = model["id"].as_i64().unwrap();
+
+    let part = erin.post(
+        &format!("/api/v1/models/{mid}/parts"),
+        &json!({"kind": "region", "center": [0.5, 0.5, 0.0], "vertex_ids": [1, 2, 3],
+                "comment": "the inscription"}),
+    );
+    assert_eq!(part.status, 201, "{}", part.text());
+    let pid = part.json()["id"].as_i64().unwrap();
+    let edited = paula.patch(
+        &format!("/api/v1/parts/{pid}"),
+        &json!({"vertex_ids": [1, 2, 3, 4, 5], "comment": "two more letters"}),
+    );
+    assert_eq!(edited.status, 200, "{}", edited.text());
+    assert_eq!(edited.json()["vertex_count"], 5);
+    // A camera-only edit is a revision too (its camera is kept with it).
+    let camera = json!({"eye": [0.5, 0.5, 2.0], "target": [0.5, 0.5, 0.0],
+                        "up": [0.0, 1.0, 0.0], "fovy": 45.0});
+    assert_eq!(
+        erin.patch(&format!("/api/v1/parts/{pid}"), &json!({"camera": camera}))
+            .status,
+        200
+    );
+
+    let history = erin.get(&format!("/api/v1/parts/{pid}/revisions")).json();
+    let h = history.as_array().unwrap();
+    assert_eq!(h.len(), 3, "{history}");
+    let field = |i: usize, k: &str| h[i][k].clone();
+    assert_eq!(
+        (0..3).map(|i| field(i, "number")).collect::<Vec<_>>(),
+        [json!(1), json!(2), json!(3)]
+    );
+    assert_eq!(field(0, "action"), "create");
+    assert_eq!(field(0, "author"), "erin");
+    assert_eq!(field(0, "comment"), "the inscription");
+    assert_eq!(field(0, "vertex_count"), 3);
+    assert_eq!(field(0, "tool"), json!(null));
+    assert_eq!(field(1, "action"), "edit");
+    assert_eq!(field(1, "author"), "paula");
+    assert_eq!(field(1, "comment"), "two more letters");
+    assert_eq!(field(1, "vertex_count"), 5);
+    assert_eq!(field(2, "author"), "erin");
+    assert_eq!(field(2, "camera")["fovy"], 45.0);
+    assert!(field(2, "created_at").as_str().unwrap().ends_with('Z'));
+    // Each revision keeps its own vertex set.
+    let v1 = erin.get(&format!("/api/v1/parts/{pid}/revisions/1/vertices"));
+    let v2 = erin.get(&format!("/api/v1/parts/{pid}/revisions/2/vertices"));
+    assert_eq!(v1.status, 200);
+    assert!(v2.body.len() > 0 && v1.body != v2.body);
+
+    // A rejected edit writes no revision.
+    let bad = paula.patch(
+        &format!("/api/v1/parts/{pid}"),
+        &json!({"vertex_ids": [], "comment": "oops"}),
+    );
+    assert_eq!(bad.status, 400, "{}", bad.text());
+    let long = "x".repeat(2001);
+    assert_eq!(
+        paula
+            .patch(&format!("/api/v1/parts/{pid}"), &json!({"comment": long}))
+            .status,
+        400
+    );
+    assert_eq!(
+        erin.get(&format!("/api/v1/parts/{pid}/revisions"))
+            .json()
+            .as_array()
+            .unwrap()
+            .len(),
+        3
+    );
+
+    // Deleting is the last revision; the history outlives the part.
+    assert_eq!(paula.delete(&format!("/api/v1/parts/{pid}")).status, 204);
+    assert_eq!(erin.get(&format!("/api/v1/parts/{pid}")).status, 404);
+    let history = erin.get(&format!("/api/v1/parts/{pid}/revisions")).json();
+    let last = history.as_array().unwrap().last().unwrap().clone();
+    assert_eq!(last["action"], "delete");
+    assert_eq!(last["author"], "paula");
+    assert_eq!(last["vertex_count"], 5);
+}

@@ -9,6 +9,7 @@ mod hardening;
 mod harness;
 mod import;
 mod jobs;
+mod layers;
 mod lod;
 mod pages;
 mod render;

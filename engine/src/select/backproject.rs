@@ -76,6 +76,22 @@ pub struct BackProjection {
     pub ms: f64,
 }
 
+impl BackProjection {
+    /// The selection of one picked point (the point tool), counted against `base`.
+    pub fn of_point(picked: &super::point::PickedPoint, base: Option<&RoaringBitmap>) -> Self {
+        let mut bp = BackProjection::default();
+        bp.vertices.insert(picked.vertex);
+        bp.sum = picked.position.map(f64::from);
+        bp.anchor = Some(picked.position);
+        bp.positions = vec![(picked.vertex, picked.position)];
+        if base.is_some_and(|b| b.contains(picked.vertex)) {
+            bp.count_in_base = 1;
+            bp.sum_in_base = bp.sum;
+        }
+        bp
+    }
+}
+
 /// Summed-area table of the selected pixels.
 struct Integral {
     w: usize,

@@ -14,6 +14,7 @@
 //!   and the patch DAG down to the leaves (§4.1.2); occluded surfaces are never selected.
 //! - [`modes`]: replace / add / subtract against an existing vertex set.
 //! - [`point`]: a single click to a point part.
+//! - [`on_view`]: all of it in one call — render a view's buffers, select, back-project.
 
 pub mod backproject;
 pub mod buffers;
@@ -23,6 +24,7 @@ pub mod mask;
 pub mod maxflow;
 pub mod maxflow_grid;
 pub mod modes;
+pub mod on_view;
 pub mod pipeline;
 pub mod point;
 pub mod seeds;
@@ -32,6 +34,7 @@ pub use buffers::Buffers;
 pub use energy::EnergyParams;
 pub use mask::StrokeMask;
 pub use modes::Mode;
+pub use on_view::{Input, ViewSelectError, ViewSelection, select_on_view};
 pub use pipeline::{PixelSelection, Tool, select_pixels};
 
 /// Why a selection cannot be made. Every variant is a problem with the input (strokes,

@@ -299,8 +299,8 @@ async fn save(
     match contents::update(&state.db, content.id, base, &edit, None, post.auth.id()).await {
         Ok(saved) => {
             state.sync_search().await;
-            state.events.publish(crate::web::events::Event::content(
-                crate::web::events::EventKind::ContentUpdated,
+            state.events.publish(crate::app::events::Event::content(
+                crate::app::events::EventKind::ContentUpdated,
                 saved.id,
             ));
             Ok(redirect(&format!("/contents/{}", saved.id)))
@@ -436,8 +436,8 @@ async fn revert(
     )
     .await?;
     state.sync_search().await;
-    state.events.publish(crate::web::events::Event::content(
-        crate::web::events::EventKind::ContentUpdated,
+    state.events.publish(crate::app::events::Event::content(
+        crate::app::events::EventKind::ContentUpdated,
         *id,
     ));
     Ok(redirect(&format!("/contents/{}", *id)))

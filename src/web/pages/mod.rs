@@ -4,6 +4,7 @@
 pub mod account;
 pub mod admin;
 pub mod contents;
+pub mod jobs;
 pub mod models;
 pub mod search;
 
@@ -125,4 +126,5 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     contents::configure(cfg);
     search::configure(cfg);
     admin::configure(cfg);
+    jobs::configure(cfg);
 }

@@ -122,7 +122,7 @@ struct ModelPage {
     /// [`viewer_json`].
     viewer_data: String,
     /// The model's latest build job (progress while it runs).
-    build_job: Option<crate::web::jobs::JobView>,
+    build_job: Option<super::jobs::JobView>,
 }
 
 fn fmt3(v: &[f64; 3]) -> String {
@@ -150,7 +150,7 @@ async fn show(
         .unwrap_or_else(|| "unknown".into());
     let build_job = crate::store::jobs::latest_for_model(&state.db, model.id)
         .await?
-        .map(crate::web::jobs::JobView::new);
+        .map(super::jobs::JobView::new);
     let layout = Layout::new(&auth, model.title.clone());
     let can_edit = layout.can_edit();
     let ready = model.status == models::ModelStatus::Ready;

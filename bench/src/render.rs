@@ -1,4 +1,4 @@
-//! `meshwiki bench render MODEL`: server-side rendering of a fixed camera path (60 frames
+//! `meshwiki-bench render MODEL`: server-side rendering of a fixed camera path (60 frames
 //! orbiting and zooming in and out) at 1280×720 and a 1-pixel error threshold on the software
 //! adapter (system paper §3.3). Prints frame time (p50/p95), triangles and patches drawn,
 //! patches loaded, cache bytes and peak memory; a few frames of selection buffers are timed too.

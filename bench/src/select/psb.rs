@@ -232,7 +232,7 @@ impl Psb {
                 std::fs::create_dir_all(scratch)
                     .with_context(|| format!("creating {}", scratch.display()))?;
                 let members: Vec<&String> = wanted.iter().flat_map(|(o, s)| [o, s]).collect();
-                crate::cli::untar::untar_zstd(archive, scratch, &members)?;
+                crate::untar::untar_zstd(archive, scratch, &members)?;
                 Ok(wanted
                     .into_iter()
                     .map(|(o, s)| (scratch.join(o), scratch.join(s)))

@@ -1,4 +1,4 @@
-//! `meshwiki bench build FILE`: builds the LOD hierarchy of a scan (or of `synth:N`, the
+//! `meshwiki-bench build FILE`: builds the LOD hierarchy of a scan (or of `synth:N`, the
 //! generated relief of about N triangles, written as PLY first and not timed) into a scratch
 //! directory and prints throughput (input triangles/s), peak memory, output bytes per input
 //! triangle and output size, with ratios to the reference: Nexus' `nxsbuild` on the same
@@ -12,7 +12,7 @@ use meshwiki::jobs::{Source, parse_size, run_build};
 use meshwiki_engine::lod::BuildOptions;
 use meshwiki_engine::mesh::write_relief_ply;
 
-use super::import::{Bar, check_input, print_summary};
+use meshwiki::terminal::{Bar, check_input, print_summary};
 
 /// Options of `bench build`.
 #[derive(Debug, Clone, ClapArgs)]
@@ -147,7 +147,7 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         }
         None => {
             let path = PathBuf::from(&args.file);
-            check_input(&path)?;
+            check_input(&path).map_err(anyhow::Error::msg)?;
             path
         }
     };

@@ -103,7 +103,7 @@ impl Meshwiki {
             let mut tx = Some(tx);
             for line in BufReader::new(stdout).lines() {
                 let Ok(line) = line else { break };
-                if let Some(addr) = line.strip_prefix(crate::cli::serve::LISTENING)
+                if let Some(addr) = line.strip_prefix(meshwiki::config::LISTENING)
                     && let Some(tx) = tx.take()
                 {
                     let _ = tx.send(addr.trim().to_string());

@@ -9,7 +9,7 @@
 //!   part without vertices is framed from the model's centre through the point. Cameras given
 //!   by clients are kept (see `store::parts::Camera`);
 //! * a part without a thumbnail gets one: its camera at 320×240, the part tinted, stored as
-//!   an attachment (`thumbnail_attachment_id`) through [`super::thumbnail_png`], the code path
+//!   an attachment (`thumbnail_attachment_id`) through [`crate::render::thumbnail_png`], the code path
 //!   of model thumbnails too.
 //!
 //! Work arrives from the change events (a part created or changed, by any route), from
@@ -30,15 +30,16 @@ use meshwiki_engine::render::{Highlight, Model};
 use roaring::RoaringBitmap;
 use tokio::sync::{Notify, broadcast};
 
-use super::{RenderService, RenderServiceError, thumbnail_bytes, thumbnail_png};
+use super::App;
+use super::events::{Event, EventKind, Events};
+use super::models::{ModelRegistry, Purpose};
 use crate::config::Settings;
-use crate::jobs::{JobEvent, Jobs};
+use crate::jobs::JobEvent;
+use crate::render::{RenderService, RenderServiceError, thumbnail_bytes, thumbnail_png};
 use crate::store::attachments::{self, NewAttachment};
 use crate::store::jobs::JobStatus;
-use crate::store::models::{self, ModelStatus};
 use crate::store::parts::{self, Part};
 use crate::store::{Db, StoreError};
-use crate::web::events::{Event, EventKind, Events};
 
 /// Size of part thumbnails (as model thumbnails).
 pub const THUMB_WIDTH: u32 = crate::jobs::thumbnail::WIDTH;
@@ -56,9 +57,9 @@ pub enum ViewError {
     /// Rendering failed.
     #[error(transparent)]
     Render(#[from] RenderServiceError),
-    /// The stored vertex set is unreadable.
-    #[error("vertex set unreadable: {0}")]
-    VertexSet(String),
+    /// The model could not be opened.
+    #[error(transparent)]
+    Model(#[from] super::AppError),
     /// The thumbnail could not be stored.
     #[error("cannot store the thumbnail: {0}")]
     Io(#[from] std::io::Error),
@@ -89,20 +90,9 @@ pub fn stored_camera(c: &Camera, auto: bool) -> parts::Camera {
     }
 }
 
-/// Deserialises a stored vertex set (`None`: empty).
-pub fn vertex_set(blob: Option<&[u8]>) -> Result<RoaringBitmap, ViewError> {
-    match blob {
-        None => Ok(RoaringBitmap::new()),
-        Some(b) => {
-            RoaringBitmap::deserialize_from(b).map_err(|e| ViewError::VertexSet(e.to_string()))
-        }
-    }
-}
-
 /// What one part needs.
 struct Job {
     part: Part,
-    lod_path: std::path::PathBuf,
     blob: Option<Vec<u8>>,
 }
 
@@ -163,6 +153,7 @@ pub struct PartViews {
     db: Db,
     settings: Arc<Settings>,
     service: RenderService,
+    models: ModelRegistry,
     events: Events,
     queue: Mutex<(VecDeque<i64>, HashSet<i64>)>,
     wake: Notify,
@@ -177,28 +168,23 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 impl PartViews {
     /// Starts the task: the start-up sweep, then the event subscriptions. Does nothing but
     /// log when rendering is unavailable.
-    pub fn start(
-        db: Db,
-        settings: Arc<Settings>,
-        service: RenderService,
-        events: Events,
-        jobs: &Jobs,
-    ) -> Option<Arc<PartViews>> {
-        if !service.available() {
+    pub fn start(app: &App) -> Option<Arc<PartViews>> {
+        if !app.render.available() {
             tracing::warn!("parts get no best views or thumbnails: rendering is unavailable");
             return None;
         }
         let me = Arc::new(PartViews {
-            db,
-            settings,
-            service,
-            events: events.clone(),
+            db: app.db.clone(),
+            settings: app.settings.clone(),
+            service: app.render.clone(),
+            models: app.models.clone(),
+            events: app.events.clone(),
             queue: Mutex::new((VecDeque::new(), HashSet::new())),
             wake: Notify::new(),
             failed: Mutex::new(HashMap::new()),
         });
-        let changes = events.subscribe();
-        let builds = jobs.subscribe();
+        let changes = app.events.subscribe();
+        let builds = app.jobs.subscribe();
         tokio::spawn(me.clone().listen(changes, builds));
         tokio::spawn(me.clone().work());
         Some(me)
@@ -243,8 +229,6 @@ impl PartViews {
                 },
                 j = builds.recv() => match j {
                     Ok(JobEvent { status: JobStatus::Done, model_id: Some(m), .. }) => {
-                        // A rebuilt model's file changed: reopen it on next use.
-                        self.service.forget_model(m);
                         self.sweep(Some(m)).await;
                     }
                     Ok(_) => {}
@@ -289,22 +273,18 @@ impl PartViews {
         if lock(&self.failed).get(&id) == Some(&part.updated_at) {
             return Ok(None);
         }
-        let model = models::get(&self.db, part.model_id).await?;
-        let Some(rel) = model
-            .lod_path
-            .as_deref()
-            .filter(|_| model.status == ModelStatus::Ready)
-        else {
+        match self
+            .models
+            .ready_path(&self.db, part.model_id, Purpose::Render)
+            .await
+        {
+            Ok(_) => {}
             // Done when the model's build ends.
-            return Ok(None);
-        };
-        let lod_path = self.settings.data_dir.join(rel);
+            Err(super::AppError::Conflict(_)) => return Ok(None),
+            Err(e) => return Err(e.into()),
+        }
         let blob = parts::vertex_set_raw(&self.db, id).await?;
-        Ok(Some(Job {
-            part,
-            lod_path,
-            blob,
-        }))
+        Ok(Some(Job { part, blob }))
     }
 
     async fn process(&self, id: i64) -> Result<(), ViewError> {
@@ -370,11 +350,13 @@ impl PartViews {
     }
 
     async fn render(&self, job: &Job) -> Result<Done, ViewError> {
-        let set = vertex_set(job.blob.as_deref())?;
+        let set = parts::parse_vertex_set(job.blob.as_deref())?;
         let model = self
-            .service
-            .model(job.part.model_id, job.lod_path.clone())
-            .await?;
+            .models
+            .open(&self.db, job.part.model_id, Purpose::Render)
+            .await?
+            .render
+            .clone();
         let ticket = self
             .service
             .admit_background(WORK_BYTES + thumbnail_bytes(THUMB_WIDTH, THUMB_HEIGHT))

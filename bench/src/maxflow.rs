@@ -1,4 +1,4 @@
-//! `meshwiki bench maxflow`: the engine's Boykov–Kolmogorov solver on the reference
+//! `meshwiki-bench maxflow`: the engine's Boykov–Kolmogorov solver on the reference
 //! 8-connected grid instances of `../shared/data/maxflow`, against the flow values,
 //! labellings and PyMaxflow timings stored with them. Each instance is solved through both
 //! entry points: the grid graph (`grid` rows) and the general graph built from an edge list
@@ -375,7 +375,7 @@ impl Unpacked {
         ));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let unpacked = Unpacked { dir };
-        crate::cli::untar::untar_zstd::<&str>(archive, &unpacked.dir, &[])?;
+        crate::untar::untar_zstd::<&str>(archive, &unpacked.dir, &[])?;
         Ok(unpacked)
     }
 }

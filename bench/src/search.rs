@@ -1,4 +1,4 @@
-//! `meshwiki bench search`: generate contents into a scratch database, build the search
+//! `meshwiki-bench search`: generate contents into a scratch database, build the search
 //! index from it (the `reindex` path) and measure query latency. Prints figures; asserts
 //! nothing.
 
@@ -11,7 +11,7 @@ use meshwiki::store::Db;
 use meshwiki::store::contents::{self, ContentEdit};
 use meshwiki::store::users::{self, Role};
 
-use super::DataDirArgs;
+use crate::DataDirArgs;
 
 /// Options of `bench search`.
 #[derive(Debug, Clone, ClapArgs)]

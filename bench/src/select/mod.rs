@@ -1,9 +1,9 @@
-//! `meshwiki bench select`: the selection tools against human ground truth (issue 6; system
+//! `meshwiki-bench select`: the selection tools against human ground truth (issue 6; system
 //! paper §4.1–4.2 for the tools, §4.3 for the measure: mis-selected vertices over the
 //! region's vertices). Figures are printed, never asserted.
 //!
 //! On the Princeton segmentation benchmark ([`psb`], [`truth`]) it runs the real system: a
-//! scratch data directory, every chosen OFF model imported by this binary's `import` (the real
+//! scratch data directory, every chosen OFF model imported by `meshwiki import` (the real
 //! LOD pipeline), the real server started on an ephemeral port, an admin logged in over HTTP
 //! ([`process`], [`client`]). For each region of each model's first human segmentation
 //! ([`eval`]): a camera framing it (centroid, mean normal, extent; the most visible of a few
@@ -153,7 +153,7 @@ pub fn run(args: Args) -> Result<()> {
             data.models_available()
         );
     }
-    let exe = std::env::current_exe().context("locating this executable")?;
+    let exe = crate::meshwiki_binary()?;
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());

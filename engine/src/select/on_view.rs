@@ -1,0 +1,135 @@
+//! Selection on a view, in one call (system paper §4.1): render the view's colour, normal,
+//! depth and id buffers from the view-dependent cut, select pixels (the graph cut of the
+//! strokes, §4.2, or a single click), and back-project them to original vertex ids of the
+//! full-resolution scan (§4.1.2). The server runs this on its render pool; the viewer only
+//! ever sends strokes and a camera.
+
+use std::time::Instant;
+
+use roaring::RoaringBitmap;
+
+use super::SelectError;
+use super::backproject::{BackProjectOptions, BackProjection, back_project};
+use super::buffers::Buffers;
+use super::cut::CutStats;
+use super::energy::EnergyParams;
+use super::mask::{self, StrokeMask};
+use super::pipeline::{Tool, select_pixels};
+use super::point::{self, PickedPoint};
+use crate::camera::Camera;
+use crate::lod::Culling;
+use crate::render::{Cut, Model, Outputs, RenderError, RenderOptions, Renderer};
+
+/// What selects on the view: strokes for a tool, or a click.
+#[derive(Debug, Clone, Copy)]
+pub enum Input<'a> {
+    /// A tool's stroke mask (of the camera's size).
+    Strokes {
+        /// The tool.
+        tool: Tool,
+        /// The strokes.
+        mask: &'a StrokeMask,
+        /// The energy's weights.
+        params: &'a EnergyParams,
+    },
+    /// A click at pixel `[x, y]`: the nearest visible vertex (a point part).
+    Click([f32; 2]),
+}
+
+/// The result on the view.
+#[derive(Debug, Clone)]
+pub struct ViewSelection {
+    /// Selected vertices (with sums against `base`, for combining modes).
+    pub backprojection: BackProjection,
+    /// The click's picked point.
+    pub picked: Option<PickedPoint>,
+    /// Selected pixels.
+    pub selected_pixels: usize,
+    /// The selected pixels as a PNG (alpha 255 where selected).
+    pub mask_png: Vec<u8>,
+    /// The graph's statistics (strokes only).
+    pub cut: Option<CutStats>,
+    /// Rendering the buffers, milliseconds.
+    pub render_ms: f64,
+    /// Selecting the pixels, milliseconds.
+    pub cut_ms: f64,
+}
+
+/// Why a selection on a view failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewSelectError {
+    /// Rendering the buffers failed.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    /// The selection failed (most variants: bad input).
+    #[error(transparent)]
+    Select(#[from] SelectError),
+}
+
+/// Renders `camera`'s buffers of `model` with a view cut of `pixel_error`, selects `input` on
+/// them and back-projects to original vertex ids; `base` is the vertex set the result will
+/// be combined with (its sums are counted, see [`BackProjection`]).
+pub fn select_on_view(
+    renderer: &Renderer,
+    model: &Model,
+    camera: &Camera,
+    input: Input<'_>,
+    pixel_error: f32,
+    base: Option<&RoaringBitmap>,
+) -> Result<ViewSelection, ViewSelectError> {
+    let options = RenderOptions {
+        cut: Cut::View {
+            pixel_error,
+            culling: Culling::ALL,
+        },
+        outputs: Outputs::ALL,
+        ..RenderOptions::default()
+    };
+    let frame = renderer.render(model, camera, &options, &[])?;
+    let render_ms = frame.stats.total_ms;
+    let buffers = Buffers::from_frame(&frame)?;
+    if buffers.covered_count() == 0 {
+        return Err(SelectError::NothingVisible.into());
+    }
+    let t = Instant::now();
+    let (w, h) = (camera.width, camera.height);
+    match input {
+        Input::Click([x, y]) => {
+            let picked = point::pick(model.lod(), camera, &buffers, x, y)?;
+            let mut selected = vec![false; buffers.len()];
+            selected[picked.y as usize * w as usize + picked.x as usize] = true;
+            let backprojection = BackProjection::of_point(&picked, base);
+            Ok(ViewSelection {
+                backprojection,
+                picked: Some(picked),
+                selected_pixels: 1,
+                mask_png: mask::selection_png(w, h, &selected),
+                cut: None,
+                render_ms,
+                cut_ms: t.elapsed().as_secs_f64() * 1e3,
+            })
+        }
+        Input::Strokes { tool, mask, params } => {
+            let color_cue = model.lod().has_colors();
+            let sel = select_pixels(tool, mask, &buffers, params, color_cue)?;
+            let cut_ms = t.elapsed().as_secs_f64() * 1e3;
+            let backprojection = back_project(
+                model.lod(),
+                camera,
+                &buffers,
+                &sel.selected,
+                base,
+                &BackProjectOptions::default(),
+            )?;
+            Ok(ViewSelection {
+                mask_png: mask::selection_png(w, h, &sel.selected),
+                selected_pixels: sel.count,
+                cut: sel.cut,
+                backprojection,
+                picked: None,
+                render_ms,
+                cut_ms,
+            })
+        }
+    }
+}

@@ -1,0 +1,48 @@
+//! The error of a use case: what went wrong, in terms a caller (an HTTP handler, the CLI, a
+//! test) can map to its own answer (a status code, an exit code), without knowing which
+//! service failed.
+
+use crate::render::RenderServiceError;
+use crate::store::StoreError;
+
+/// Why a use case failed.
+#[derive(Debug, thiserror::Error)]
+pub enum AppError {
+    /// No such thing.
+    #[error("{0}")]
+    NotFound(String),
+    /// The input is not valid.
+    #[error("{0}")]
+    Invalid(String),
+    /// The input conflicts with the current state (a model not ready, a part changed since).
+    #[error("{0}")]
+    Conflict(String),
+    /// The input is of a type not understood (a mask that is not a PNG).
+    #[error("{0}")]
+    UnsupportedMedia(String),
+    /// The input is larger than allowed.
+    #[error("{0}")]
+    TooLarge(String),
+    /// The store refused or failed (keeps its stale-revision details).
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// The render service refused or failed (busy, no adapter, bad options).
+    #[error(transparent)]
+    Render(#[from] RenderServiceError),
+    /// A server fault (logged where it happens).
+    #[error("{0}")]
+    Internal(String),
+}
+
+impl AppError {
+    /// Invalid input, with a message.
+    pub fn invalid(msg: impl Into<String>) -> AppError {
+        AppError::Invalid(msg.into())
+    }
+
+    /// A server fault, logged.
+    pub fn internal(err: impl std::fmt::Display) -> AppError {
+        tracing::error!(error = %err, "internal error");
+        AppError::Internal(err.to_string())
+    }
+}
