@@ -105,6 +105,11 @@ const MIGRATIONS: &[(i64, &str, &str)] = &[
         "part_revisions",
         include_str!("../../migrations/0006_part_revisions.sql"),
     ),
+    (
+        7,
+        "part_revision_comments",
+        include_str!("../../migrations/0007_part_revision_comments.sql"),
+    ),
 ];
 
 impl MigrationSource<'static> for Embedded {

@@ -286,7 +286,7 @@ fn parts_edited_through_the_api_keep_their_history() {
     let v1 = erin.get(&format!("/api/v1/parts/{pid}/revisions/1/vertices"));
     let v2 = erin.get(&format!("/api/v1/parts/{pid}/revisions/2/vertices"));
     assert_eq!(v1.status, 200);
-    assert!(v2.body.len() > 0 && v1.body != v2.body);
+    assert!(!v2.body.is_empty() && v1.body != v2.body);
 
     // A rejected edit writes no revision.
     let bad = paula.patch(
