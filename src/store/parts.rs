@@ -337,6 +337,35 @@ fn camera_json(c: &Option<Camera>) -> Option<String> {
     c.map(|c| serde_json::to_string(&c).unwrap_or_default())
 }
 
+/// The stored form of a state's vertex set (`None` when empty) and camera (JSON).
+fn row_image(state: &PartState) -> (Option<Vec<u8>>, Option<String>) {
+    let blob = (!state.vertices.is_empty()).then(|| serialize_vertex_set(&state.vertices));
+    (blob, camera_json(&state.camera))
+}
+
+/// Appends the revision of part `id` in `state` (`row`: its stored vertex set and camera).
+async fn record_revision_tx(
+    tx: &mut Tx,
+    id: i64,
+    model_id: i64,
+    state: &PartState,
+    row: (&Option<Vec<u8>>, &Option<String>),
+    action: Action,
+    prov: &Provenance,
+) -> Result<()> {
+    let snapshot = Snapshot {
+        part_id: id,
+        model_id,
+        kind: state.kind,
+        center: state.center,
+        vertex_count: state.vertices.len() as i64,
+        vertex_set: row.0.as_deref(),
+        camera: row.1.as_deref(),
+    };
+    part_revisions::record_tx(tx, &snapshot, action.as_str(), prov).await?;
+    Ok(())
+}
+
 /// Inserts or updates the row of a part (`id`: `None` inserts) with `state`, appends its
 /// revision and its audit entry, all in `tx`. The one writer of `parts`' user-facing columns.
 async fn write_tx(
@@ -351,8 +380,7 @@ async fn write_tx(
     state.validate()?;
     prov.validate()?;
     check_vertex_set(tx, model_id, &state.vertices, limit).await?;
-    let blob = (!state.vertices.is_empty()).then(|| serialize_vertex_set(&state.vertices));
-    let camera = camera_json(&state.camera);
+    let (blob, camera) = row_image(state);
     let now = crate::now_rfc3339();
     let count = state.vertices.len() as i64;
     let thumbnail_missing = "thumbnail attachment does not exist";
@@ -399,16 +427,7 @@ async fn write_tx(
             id
         }
     };
-    let snapshot = Snapshot {
-        part_id: id,
-        model_id,
-        kind: state.kind,
-        center: state.center,
-        vertex_count: count,
-        vertex_set: blob.as_deref(),
-        camera: camera.as_deref(),
-    };
-    part_revisions::record_tx(tx, &snapshot, action.as_str(), prov).await?;
+    record_revision_tx(tx, id, model_id, state, (&blob, &camera), action, prov).await?;
     let audit = if action == Action::Create {
         "part.create"
     } else {
@@ -612,23 +631,23 @@ pub async fn delete(db: &Db, id: i64, prov: &Provenance) -> Result<Part> {
     prov.validate()?;
     let mut tx = db.begin().await?;
     let (part, state) = state_tx(&mut tx, id).await?;
-    let blob = (!state.vertices.is_empty()).then(|| serialize_vertex_set(&state.vertices));
-    let camera = camera_json(&state.camera);
+    let (blob, camera) = row_image(&state);
     super::changes::push_part(&mut tx, id).await?;
     sqlx::query("DELETE FROM parts WHERE id = ?")
         .bind(id)
         .execute(&mut *tx)
         .await?;
-    let snapshot = Snapshot {
-        part_id: id,
-        model_id: part.model_id,
-        kind: part.kind,
-        center: part.center,
-        vertex_count: part.vertex_count,
-        vertex_set: blob.as_deref(),
-        camera: camera.as_deref(),
-    };
-    part_revisions::record_tx(&mut tx, &snapshot, Action::Delete.as_str(), prov).await?;
+    let row = (&blob, &camera);
+    record_revision_tx(
+        &mut tx,
+        id,
+        part.model_id,
+        &state,
+        row,
+        Action::Delete,
+        prov,
+    )
+    .await?;
     super::audit::record(
         &mut tx,
         Some(prov.user_id),
