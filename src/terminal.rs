@@ -1,6 +1,6 @@
 //! Terminal output shared by the command line (`meshwiki import`) and the benches
 //! (`meshwiki-bench build`): the build's progress bar, the check of an input scan, the
-//! summary of a build.
+//! summary of a build, the log output.
 
 use std::path::Path;
 use std::time::Duration;
@@ -105,4 +105,16 @@ pub fn print_summary(report: &BuildReport) {
         mb(report.output_bytes),
         report.output_bytes as f64 / (i.triangles.max(1)) as f64
     );
+}
+
+/// Logs to standard error, filtered by `MESHWIKI_LOG` (default `info`, quiet sqlx queries),
+/// coloured only on a terminal.
+pub fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_env("MESHWIKI_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx::query=error"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .init();
 }

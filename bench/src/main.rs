@@ -77,13 +77,7 @@ pub fn meshwiki_binary() -> anyhow::Result<PathBuf> {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    let filter = tracing_subscriber::EnvFilter::try_from_env("MESHWIKI_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx::query=error"));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+    meshwiki::terminal::init_logging();
     let result = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
