@@ -18,7 +18,7 @@ use meshwiki_engine::mesh::{ImportStats, synth};
 use meshwiki_engine::progress::NoProgress;
 use meshwiki_engine::render::encode::{self, ImageFormat};
 use meshwiki_engine::render::{
-    AdapterChoice, Cut, Model, Outputs, RenderOptions, Renderer, RendererOptions,
+    AdapterChoice, Cut, Outputs, RenderModel, RenderOptions, Renderer, RendererOptions,
 };
 
 const FRAMES: usize = 60;
@@ -58,10 +58,10 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 }
 
 /// Opens `model`, building its LOD file first when it is a mesh or `synth:N`.
-fn open_model(model: &Path, temp: &mut Option<TempDir>) -> Result<(Model, Option<f64>)> {
+fn open_model(model: &Path, temp: &mut Option<TempDir>) -> Result<(RenderModel, Option<f64>)> {
     let name = model.to_string_lossy();
     if model.extension().is_some_and(|e| e == "mwlod") {
-        let m = Model::open(model).with_context(|| format!("opening {}", model.display()))?;
+        let m = RenderModel::open(model).with_context(|| format!("opening {}", model.display()))?;
         return Ok((m, None));
     }
     let dir = std::env::temp_dir().join(format!("meshwiki-bench-render-{}", std::process::id()));
@@ -116,14 +116,14 @@ fn open_model(model: &Path, temp: &mut Option<TempDir>) -> Result<(Model, Option
         report.output_bytes as f64 / 1e6
     );
     Ok((
-        Model::open(&out).context("opening the built LOD file")?,
+        RenderModel::open(&out).context("opening the built LOD file")?,
         Some(seconds),
     ))
 }
 
 /// The camera path: an orbit that zooms from 2.4 to 0.5 model radii and back. Flat models
 /// (reliefs) are orbited around their thin axis at a 25° tilt, others around +Y at 15°.
-fn camera_path(model: &Model) -> Vec<Camera> {
+fn camera_path(model: &RenderModel) -> Vec<Camera> {
     let h = model.lod().header();
     let ext: Vec<f32> = (0..3)
         .map(|k| (h.bbox_max[k] - h.bbox_min[k]).abs())

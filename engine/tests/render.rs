@@ -15,7 +15,7 @@ use meshwiki_engine::render::callouts::{self, CalloutPart, HiddenReason, LayoutO
 use meshwiki_engine::render::encode::{self, ImageFormat};
 use meshwiki_engine::render::highlight::{OUTLINE_BIT, TINT_MASK};
 use meshwiki_engine::render::{
-    AdapterChoice, Cut, Frame, GpuDevice, Highlight, Model, NO_NODE, Outputs, RenderError,
+    AdapterChoice, Cut, Frame, GpuDevice, Highlight, NO_NODE, Outputs, RenderError, RenderModel,
     RenderOptions, Renderer, RendererOptions, best_view,
 };
 use roaring::RoaringBitmap;
@@ -80,7 +80,7 @@ fn renderer() -> Option<&'static Renderer> {
 /// A relief of about `tris` triangles built into a LOD file with small patches.
 struct TestModel {
     mesh: Mesh,
-    model: Model,
+    model: RenderModel,
 }
 
 fn build(name: &str, mesh: Mesh, max_patch_triangles: usize) -> TestModel {
@@ -92,7 +92,7 @@ fn build(name: &str, mesh: Mesh, max_patch_triangles: usize) -> TestModel {
         ..Default::default()
     };
     lod::build_mesh(&mesh, &out, &options, &NoProgress).expect("build");
-    let model = Model::open(&out).expect("open");
+    let model = RenderModel::open(&out).expect("open");
     TestModel { mesh, model }
 }
 

@@ -13,7 +13,9 @@ use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{self, BuildOptions};
 use meshwiki_engine::mesh::Mesh;
 use meshwiki_engine::progress::NoProgress;
-use meshwiki_engine::render::{AdapterChoice, Frame, GpuDevice, Model, Renderer, RendererOptions};
+use meshwiki_engine::render::{
+    AdapterChoice, Frame, GpuDevice, RenderModel, Renderer, RendererOptions,
+};
 use meshwiki_engine::select::mask::{self, StrokeMask};
 use meshwiki_engine::select::modes::{self, Mode, VertexSet};
 use meshwiki_engine::select::{
@@ -70,7 +72,7 @@ fn grid(mesh: &mut Mesh, x0: f32, x1: f32, y0: f32, y1: f32, z: f32) {
 }
 
 struct Planes {
-    model: Model,
+    model: RenderModel,
     mesh: Mesh,
     back_vertices: u32,
 }
@@ -92,7 +94,7 @@ fn planes() -> &'static Planes {
             ..Default::default()
         };
         lod::build_mesh(&mesh, &out, &options, &NoProgress).expect("build");
-        let model = Model::open(&out).expect("open");
+        let model = RenderModel::open(&out).expect("open");
         let _ = std::fs::remove_dir_all(&dir);
         assert!(
             model.lod().header().level_count > 1,
@@ -107,7 +109,7 @@ fn planes() -> &'static Planes {
 }
 
 /// Every original vertex's position as stored in the leaves (level 0).
-fn leaf_positions(model: &Model) -> Vec<[f32; 3]> {
+fn leaf_positions(model: &RenderModel) -> Vec<[f32; 3]> {
     let lod = model.lod();
     let mut out = vec![[f32::NAN; 3]; lod.header().input_vertex_count as usize];
     for (n, rec) in lod.nodes().iter().enumerate() {
@@ -132,7 +134,7 @@ fn camera(eye: Vec3, width: u32, height: u32) -> Camera {
     }
 }
 
-fn render(r: &Renderer, m: &Model, c: &Camera) -> Frame {
+fn render(r: &Renderer, m: &RenderModel, c: &Camera) -> Frame {
     r.render_buffers(m, c, &[]).expect("render")
 }
 

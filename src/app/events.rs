@@ -6,12 +6,14 @@
 
 use serde::Serialize;
 use tokio::sync::broadcast;
+use utoipa::ToSchema;
 
 /// Events buffered per subscriber before it is told to resync.
 const CAPACITY: usize = 256;
 
 /// What changed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+#[schema(as = ChangeEventKind)]
 pub enum EventKind {
     /// A part was created.
     #[serde(rename = "part.created")]
@@ -34,13 +36,16 @@ pub enum EventKind {
 }
 
 /// One change, as sent to viewers (JSON in the `data` field of an SSE message whose `event`
-/// is `change`).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+/// is `change`). Events carry only kinds and ids: a viewer fetches what changed through the
+/// ordinary API.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, ToSchema)]
+#[schema(as = ChangeEvent)]
 pub struct Event {
     /// What changed.
     #[serde(rename = "type")]
     pub kind: EventKind,
-    /// Model concerned; `None` for contents, which may be assigned to parts of any model.
+    /// Model concerned; `null` for contents, which may be assigned to parts of any model
+    /// (content events concern every model).
     pub model_id: Option<i64>,
     /// Part concerned.
     pub part_id: Option<i64>,

@@ -12,8 +12,10 @@
 //! * [`parts`]: every create, edit and delete of a part, each a revision;
 //! * [`selections`]: draft selections and their confirmation into parts;
 //! * [`events`]: the live-update bus;
-//! * [`views`]: best views and thumbnails of parts, in the background.
+//! * [`views`]: best views and thumbnails of parts, in the background;
+//! * [`client`]: the limits and settings clients size their requests to.
 
+pub mod client;
 pub mod error;
 pub mod events;
 pub mod models;

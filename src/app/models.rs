@@ -2,7 +2,7 @@
 //! serving, rendering, selection and part views, with the one readiness check ("the model is
 //! ready and its file is a plain path under the data directory").
 //!
-//! An open model maps its file once; the engine's render [`Model`] wraps the same mapping, so
+//! An open model maps its file once; the engine's [`RenderModel`] wraps the same mapping, so
 //! the renderer's patch cache is keyed by it. Entries are checked against the file on disk
 //! (device, inode, size, modification time) on every use, so a rebuilt model is reopened;
 //! they are dropped on delete and when a build of the model finishes, and the least recently
@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Instant, SystemTime};
 
 use meshwiki_engine::lod::LodFile;
-use meshwiki_engine::render::Model;
+use meshwiki_engine::render::RenderModel;
 
 use super::AppError;
 use crate::render::RenderService;
@@ -73,7 +73,7 @@ pub struct OpenModel {
     /// The mapped file.
     pub lod: Arc<LodFile>,
     /// The renderer's model (the same mapping).
-    pub render: Model,
+    pub render: RenderModel,
     /// Quoted ETag of the whole file (header checksum and size).
     pub etag: String,
     /// Path of the file.
@@ -230,7 +230,7 @@ impl ModelRegistry {
         let open = Arc::new(OpenModel {
             id: model_id,
             etag: format!("\"{:08x}-{:x}\"", h.header_crc, lod.bytes().len()),
-            render: Model::new(lod.clone()),
+            render: RenderModel::new(lod.clone()),
             lod,
             path,
             json: OnceLock::new(),

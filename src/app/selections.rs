@@ -15,13 +15,16 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::render::Outputs;
+use meshwiki_engine::select::graph_cut::CutStats;
 use meshwiki_engine::select::mask::{MaskError, StrokeMask};
 use meshwiki_engine::select::modes::{self, Mode, VertexSet};
+use meshwiki_engine::select::point::PickedPoint;
 use meshwiki_engine::select::{
     EnergyParams, Input, SelectError, Tool, ViewSelectError, select_on_view,
 };
 use serde::{Deserialize, Serialize};
 use serde_json::json;
+use utoipa::ToSchema;
 
 use super::models::Purpose;
 use super::{App, AppError};
@@ -47,7 +50,7 @@ const BACKPROJECT_BYTES: u64 = 64 << 20;
 // ---- request --------------------------------------------------------------------------------
 
 /// The tools of the API: the engine's three plus a single click.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ToolName {
     /// Polygon.
@@ -80,10 +83,10 @@ impl ToolName {
 }
 
 /// The view the strokes were drawn on.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ViewCamera {
-    /// Eye.
+    /// Eye position.
     pub eye: [f32; 3],
     /// Point looked at.
     pub target: [f32; 3],
@@ -98,6 +101,18 @@ pub struct ViewCamera {
 }
 
 impl ViewCamera {
+    /// The view of an engine camera.
+    pub fn of(c: &Camera) -> ViewCamera {
+        ViewCamera {
+            eye: c.eye.to_array(),
+            target: c.target.to_array(),
+            up: c.up.to_array(),
+            fovy: c.fovy_deg,
+            width: c.width,
+            height: c.height,
+        }
+    }
+
     fn engine(&self) -> Camera {
         Camera {
             eye: Vec3::from(self.eye),
@@ -110,30 +125,34 @@ impl ViewCamera {
     }
 }
 
-/// The `request` field.
-#[derive(Debug, Clone, Deserialize)]
+/// A selection request: the `request` field of the multipart form (or the whole JSON body
+/// of a point selection).
+#[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SelectionRequest {
-    /// Tool.
+    /// Tool (`point` needs `point` and no mask; the others need the stroke mask).
     pub tool: ToolName,
-    /// How the result combines with the base.
+    /// How the result combines with the base (default `replace`; the point tool only
+    /// replaces; `subtract` needs a non-empty base).
     #[serde(default)]
     pub mode: Mode,
-    /// The view.
+    /// The view the strokes were drawn on (or the click made on).
     pub camera: ViewCamera,
-    /// Point tool: the clicked pixel.
+    /// Point tool: the clicked pixel `[x, y]`.
     #[serde(default)]
     pub point: Option<[f32; 2]>,
-    /// A part to edit.
+    /// A part of this model to edit: its vertex set is the base of add/subtract, and
+    /// confirming updates it (not with `base`).
     #[serde(default)]
     pub part_id: Option<i64>,
-    /// A previous draft to build on.
+    /// A previous draft of the same user on this model to build on instead (several strokes
+    /// before confirming; not with `part_id`).
     #[serde(default)]
     pub base: Option<String>,
-    /// Energy weights.
+    /// The energy's weights (default: the engine's).
     #[serde(default)]
     pub params: Option<EnergyParams>,
-    /// Pixel error of the rendered cut.
+    /// Pixel error of the rendered cut, 0-64 (default 1).
     #[serde(default)]
     pub pixel_error: Option<f32>,
 }
@@ -164,6 +183,83 @@ fn view_error(e: ViewSelectError) -> AppError {
 
 // ---- drafts ---------------------------------------------------------------------------------
 
+/// Back-projection statistics of a draft.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct BackprojectionStats {
+    /// Patches drawn under the selected pixels.
+    pub drawn_patches: usize,
+    /// Leaves reached down the DAG.
+    pub leaves: usize,
+    /// Full-resolution vertices tested.
+    pub vertices_tested: u64,
+}
+
+/// Timings of a draft, milliseconds.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct SelectionTimings {
+    /// Rendering the view's buffers.
+    pub render: f64,
+    /// Selecting the pixels (the graph cut, or the click).
+    pub cut: f64,
+    /// Back-projecting to original vertex ids.
+    pub backproject: f64,
+    /// The whole request.
+    pub total: f64,
+}
+
+/// A draft selection as the API shows it: what `POST /api/v1/models/{id}/selections` made,
+/// kept for 30 minutes for its user until confirmed or discarded.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct SelectionDraft {
+    /// Id of the draft (random hex).
+    pub id: String,
+    /// Model.
+    pub model_id: i64,
+    /// Tool that made it.
+    pub tool: ToolName,
+    /// How it combined with its base (`replace` when it had none).
+    pub mode: Mode,
+    /// Kind of the part it makes (point for the point tool, else region).
+    pub kind: PartKind,
+    /// The part it edits (the request's `part_id`, or its base draft's): confirming updates
+    /// it; `null`: confirming creates a part.
+    pub part_id: Option<i64>,
+    /// The previous draft it was built on.
+    pub base: Option<String>,
+    /// The view it was made on.
+    pub camera: ViewCamera,
+    /// Viewport width in pixels.
+    pub width: u32,
+    /// Viewport height in pixels.
+    pub height: u32,
+    /// Pixels selected on the view.
+    pub selected_pixels: usize,
+    /// Vertices the view selected (before combining with the base).
+    pub selected_vertices: u64,
+    /// Vertices in the draft that were not in the base.
+    pub added: u64,
+    /// Vertices of the base that are not in the draft.
+    pub removed: u64,
+    /// Point tool: the picked point.
+    pub point: Option<PickedPoint>,
+    /// Stroke tools: the graph cut's statistics.
+    pub graph: Option<CutStats>,
+    /// Back-projection statistics.
+    pub backprojection: BackprojectionStats,
+    /// Timings.
+    pub timings_ms: SelectionTimings,
+    /// When the draft expires.
+    #[schema(format = DateTime)]
+    pub expires_at: Option<String>,
+    /// Vertices in the draft.
+    pub vertex_count: u64,
+    /// A vertex of the selection near its centroid (model coordinates); `null` when empty.
+    pub center: Option<[f64; 3]>,
+    /// The selected pixels as a PNG data URL (alpha 255 where selected).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mask: Option<String>,
+}
+
 /// A draft selection, kept until confirmed, discarded or expired.
 #[derive(Debug)]
 pub struct Draft {
@@ -189,7 +285,7 @@ pub struct Draft {
     pub camera: ViewCamera,
     /// The selected pixels (PNG).
     pub mask_png: Vec<u8>,
-    info: serde_json::Value,
+    info: SelectionDraft,
     created: Instant,
 }
 
@@ -204,14 +300,13 @@ impl Draft {
     }
 
     /// The draft as the API shows it (with the mask as a data URL).
-    pub fn json(&self, with_mask: bool) -> serde_json::Value {
-        let mut v = self.info.clone();
-        v["vertex_count"] = json!(self.set.vertices.len());
-        v["center"] = json!(self.center());
-        if with_mask {
-            v["mask"] = json!(format!("data:image/png;base64,{}", base64(&self.mask_png)));
+    pub fn json(&self, with_mask: bool) -> SelectionDraft {
+        SelectionDraft {
+            vertex_count: self.set.vertices.len(),
+            center: self.center(),
+            mask: with_mask.then(|| format!("data:image/png;base64,{}", base64(&self.mask_png))),
+            ..self.info.clone()
         }
-        v
     }
 }
 
@@ -294,8 +389,9 @@ pub fn base64(bytes: &[u8]) -> String {
     out
 }
 
-/// Body of `POST /api/v1/selections/{draft}/confirm`.
-#[derive(Debug, Default, Deserialize)]
+/// Body of `POST /api/v1/selections/{draft}/confirm` (optional: an empty body confirms with
+/// the defaults).
+#[derive(Debug, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ConfirmRequest {
     /// Kind of the part (default: point for the point tool, else region).
@@ -479,36 +575,41 @@ impl App {
         let id = crate::random_hex(16);
         let total_ms = started.elapsed().as_secs_f64() * 1e3;
         let expires = time::OffsetDateTime::now_utc() + DRAFT_TTL;
-        let info = json!({
-            "id": id,
-            "model_id": model_id,
-            "tool": request.tool,
-            "mode": mode,
-            "kind": kind,
-            "part_id": base_part,
-            "base": request.base,
-            "camera": request.camera,
-            "width": w,
-            "height": h,
-            "selected_pixels": outcome.selected_pixels,
-            "selected_vertices": outcome.backprojection.vertices.len(),
-            "added": added,
-            "removed": removed,
-            "point": outcome.picked,
-            "graph": outcome.cut,
-            "backprojection": {
-                "drawn_patches": outcome.backprojection.drawn_nodes,
-                "leaves": outcome.backprojection.leaves,
-                "vertices_tested": outcome.backprojection.vertices_tested,
+        let info = SelectionDraft {
+            id: id.clone(),
+            model_id,
+            tool: request.tool,
+            mode,
+            kind,
+            part_id: base_part,
+            base: request.base.clone(),
+            camera: request.camera,
+            width: w,
+            height: h,
+            selected_pixels: outcome.selected_pixels,
+            selected_vertices: outcome.backprojection.vertices.len(),
+            added,
+            removed,
+            point: outcome.picked,
+            graph: outcome.cut.clone(),
+            backprojection: BackprojectionStats {
+                drawn_patches: outcome.backprojection.drawn_nodes,
+                leaves: outcome.backprojection.leaves,
+                vertices_tested: outcome.backprojection.vertices_tested,
             },
-            "timings_ms": {
-                "render": outcome.render_ms,
-                "cut": outcome.cut_ms,
-                "backproject": outcome.backprojection.ms,
-                "total": total_ms,
+            timings_ms: SelectionTimings {
+                render: outcome.render_ms,
+                cut: outcome.cut_ms,
+                backproject: outcome.backprojection.ms,
+                total: total_ms,
             },
-            "expires_at": expires.format(&time::format_description::well_known::Rfc3339).ok(),
-        });
+            expires_at: expires
+                .format(&time::format_description::well_known::Rfc3339)
+                .ok(),
+            vertex_count: set.vertices.len(),
+            center: set.anchor.map(|a| a.map(f64::from)),
+            mask: None,
+        };
         tracing::info!(
             model_id,
             tool = request.tool.as_str(),

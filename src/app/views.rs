@@ -26,7 +26,7 @@ use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::render::best_view::{self, BestViewOptions};
 use meshwiki_engine::render::highlight::TINTS;
-use meshwiki_engine::render::{Highlight, Model};
+use meshwiki_engine::render::{Highlight, RenderModel};
 use roaring::RoaringBitmap;
 use tokio::sync::{Notify, broadcast};
 
@@ -106,7 +106,7 @@ struct Done {
 /// Computes the best view of `set` on `model` (a framing of the point for empty sets).
 pub fn compute_best_view(
     renderer: &meshwiki_engine::render::Renderer,
-    model: &Model,
+    model: &RenderModel,
     set: &RoaringBitmap,
     center: [f64; 3],
 ) -> Result<(Camera, Option<f32>), RenderServiceError> {

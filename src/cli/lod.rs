@@ -1,14 +1,19 @@
-//! `meshwiki lod build|dump`: developer tools for `.mwlod` files. `build` writes a LOD file
-//! from a scan; `dump` prints the tables and decoded patches (the reference decoder) as JSON,
-//! which the browser decoder's tests compare against.
+//! `meshwiki lod build|dump|cut`: developer tools for `.mwlod` files. `build` writes a LOD
+//! file from a scan; `dump` prints the tables and decoded patches (the reference decoder) as
+//! JSON, which the browser decoder's tests compare against; `cut` prints the view-dependent
+//! cut (the engine's cut rule, `meshwiki_engine::lod::cut_view`) for a list of cameras, which
+//! the browser's cut (`static/js/lod/cut.js`) is tested against.
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
+use glam::Vec3;
+use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{self, BuildOptions, LodFile};
 use meshwiki_engine::progress::NoProgress;
+use serde::Deserialize;
 use serde_json::json;
 
 /// `lod` subcommands.
@@ -18,6 +23,32 @@ pub enum LodCommand {
     Build(BuildArgs),
     /// Print a `.mwlod` file's header and decoded patches as JSON.
     Dump(DumpArgs),
+    /// Print the view-dependent cut of a `.mwlod` file for each camera of a JSON list.
+    Cut(CutArgs),
+}
+
+/// Arguments of `lod cut`.
+#[derive(Debug, Args)]
+pub struct CutArgs {
+    /// The LOD file.
+    pub file: PathBuf,
+    /// JSON array of views: `{"eye", "target", "up", "fovy" (degrees), "width", "height",
+    /// "pixel_error"}`.
+    #[arg(long)]
+    pub views: PathBuf,
+}
+
+/// One view of `lod cut`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CutView {
+    eye: [f32; 3],
+    target: [f32; 3],
+    up: [f32; 3],
+    fovy: f32,
+    width: u32,
+    height: u32,
+    pixel_error: f32,
 }
 
 /// Arguments of `lod build`.
@@ -63,7 +94,44 @@ pub fn run(command: LodCommand) -> anyhow::Result<()> {
             Ok(())
         }
         LodCommand::Dump(args) => dump(args),
+        LodCommand::Cut(args) => cut(args),
     }
+}
+
+/// Prints `[[node, …], …]`: the cut of each view (frustum and back-face culling on), in node
+/// order.
+fn cut(args: CutArgs) -> anyhow::Result<()> {
+    let file = LodFile::open(&args.file)
+        .with_context(|| format!("cannot open {}", args.file.display()))?;
+    let text = std::fs::read_to_string(&args.views)
+        .with_context(|| format!("cannot read {}", args.views.display()))?;
+    let views: Vec<CutView> = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a JSON array of views", args.views.display()))?;
+    let mut cuts = Vec::with_capacity(views.len());
+    for (k, v) in views.iter().enumerate() {
+        let camera = Camera {
+            eye: Vec3::from(v.eye),
+            target: Vec3::from(v.target),
+            up: Vec3::from(v.up),
+            fovy_deg: v.fovy,
+            width: v.width,
+            height: v.height,
+        };
+        camera
+            .validate()
+            .with_context(|| format!("view {k} is not a valid camera"))?;
+        if !(v.pixel_error.is_finite() && v.pixel_error > 0.0) {
+            anyhow::bail!("view {k}: pixel_error must be a positive number");
+        }
+        cuts.push(lod::cut_view(
+            file.nodes(),
+            &camera,
+            v.pixel_error,
+            lod::Culling::ALL,
+        ));
+    }
+    println!("{}", serde_json::to_string(&cuts)?);
+    Ok(())
 }
 
 fn dump(args: DumpArgs) -> anyhow::Result<()> {

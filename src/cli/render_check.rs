@@ -10,7 +10,7 @@ use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{self, BuildOptions};
 use meshwiki_engine::mesh::{ImportStats, synth};
 use meshwiki_engine::progress::NoProgress;
-use meshwiki_engine::render::{AdapterChoice, Model, Renderer, RendererOptions};
+use meshwiki_engine::render::{AdapterChoice, RenderModel, Renderer, RendererOptions};
 
 /// Options of `render-check`.
 #[derive(Debug, Clone, ClapArgs)]
@@ -56,7 +56,7 @@ pub fn run(args: &Args) -> Result<()> {
         &NoProgress,
     )
     .context("building the test relief")?;
-    let model = Model::open(&out).context("opening the test relief")?;
+    let model = RenderModel::open(&out).context("opening the test relief")?;
     // Look along the relief's thin axis (it faces that way), from 2.5 radii.
     let h = model.lod().header();
     let ext: Vec<f32> = (0..3)

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{LodFile, NO_GROUP, cut_uniform};
-use meshwiki_engine::render::Model;
+use meshwiki_engine::render::RenderModel;
 use meshwiki_engine::render::best_view::{BestViewOptions, framing_camera};
 use meshwiki_engine::render::encode::{self, ImageFormat};
 
@@ -77,7 +77,7 @@ pub fn render_png(settings: &RenderSettings, lod: Arc<LodFile>) -> Result<Vec<u8
     let cam = camera(&lod);
     let service = RenderService::shared(settings);
     if service.available() {
-        let model = Model::new(lod.clone());
+        let model = RenderModel::new(lod.clone());
         let bytes = crate::render::thumbnail_bytes(WIDTH, HEIGHT);
         let png = service.run_blocking(bytes, |r| {
             let png = crate::render::thumbnail_png(r, &model, &cam, &[]);

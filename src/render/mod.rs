@@ -17,7 +17,8 @@ use std::time::{Duration, Instant};
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::render::encode::{self, EncodeError, ImageFormat};
 use meshwiki_engine::render::{
-    AdapterChoice, Highlight, Model, Outputs, RenderError, RenderOptions, Renderer, RendererOptions,
+    AdapterChoice, Highlight, Outputs, RenderError, RenderModel, RenderOptions, Renderer,
+    RendererOptions,
 };
 
 use crate::config::RenderSettings;
@@ -250,7 +251,7 @@ pub fn thumbnail_bytes(width: u32, height: u32) -> u64 {
 /// as PNG.
 pub fn thumbnail_png(
     renderer: &Renderer,
-    model: &Model,
+    model: &RenderModel,
     camera: &Camera,
     highlights: &[Highlight<'_>],
 ) -> Result<Vec<u8>, RenderServiceError> {

@@ -25,6 +25,7 @@ use tantivy::tokenizer::{
     TextAnalyzer,
 };
 use tantivy::{Index, IndexReader, IndexWriter, ReloadPolicy, TantivyDocument, Term};
+use utoipa::ToSchema;
 
 use crate::store::contents::SearchSource;
 use crate::store::{self, Db, StoreError};
@@ -101,7 +102,7 @@ struct Payload {
 }
 
 /// One search result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct SearchHit {
     /// Content id.
     pub id: i64,
@@ -111,9 +112,10 @@ pub struct SearchHit {
     pub title_html: String,
     /// Caption.
     pub caption: String,
-    /// Excerpt of the body as HTML with matches in `<b>` (escaped, safe to embed).
+    /// Excerpt of the body as HTML with matches in `<b>` (escaped, safe to embed); the start
+    /// of the caption or body when the body has no match.
     pub snippet_html: String,
-    /// BM25 score.
+    /// BM25 score (higher is better).
     pub score: f32,
 }
 

@@ -3,11 +3,12 @@
 
 use serde::Serialize;
 use sqlx::FromRow;
+use utoipa::ToSchema;
 
 use super::{Db, Result, StoreError, Tx};
 
 /// A content as assigned to a part.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, FromRow, ToSchema)]
 pub struct AssignedContent {
     /// Content id.
     pub id: i64,
@@ -26,11 +27,12 @@ pub struct AssignedContent {
     /// Current revision of the content.
     pub current_revision: i64,
     /// Last change of the content.
+    #[schema(format = DateTime)]
     pub updated_at: String,
 }
 
 /// A part a content is assigned to.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, FromRow, ToSchema)]
 pub struct AssignedPart {
     /// Part id.
     pub id: i64,
@@ -41,6 +43,7 @@ pub struct AssignedPart {
     /// Model title.
     pub model_title: String,
     /// Part kind.
+    #[schema(value_type = crate::store::parts::PartKind)]
     pub kind: String,
     /// Position of the content in the part's list.
     pub position: i64,

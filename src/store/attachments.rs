@@ -4,11 +4,12 @@
 
 use serde::Serialize;
 use sqlx::FromRow;
+use utoipa::ToSchema;
 
 use super::{Db, Result, StoreError, Tx};
 
 /// An attachment.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, FromRow, ToSchema)]
 pub struct Attachment {
     /// Id.
     pub id: i64,
@@ -23,6 +24,7 @@ pub struct Attachment {
     /// Uploader.
     pub uploaded_by: i64,
     /// Upload time.
+    #[schema(format = DateTime)]
     pub created_at: String,
 }
 

@@ -2,11 +2,12 @@
 
 use serde::Serialize;
 use sqlx::FromRow;
+use utoipa::ToSchema;
 
 use super::{Db, Page, Result, Tx};
 
 /// One audit entry.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, FromRow, ToSchema)]
 pub struct AuditEntry {
     /// Id.
     pub id: i64,
@@ -18,10 +19,12 @@ pub struct AuditEntry {
     pub entity: String,
     /// Id of the entity changed.
     pub entity_id: Option<i64>,
-    /// JSON details.
+    /// Details of the action (JSON, its fields depend on the action).
     #[serde(serialize_with = "as_json")]
+    #[schema(value_type = Object)]
     pub details: String,
     /// Time.
+    #[schema(format = DateTime)]
     pub created_at: String,
 }
 

@@ -6,11 +6,12 @@ use std::collections::HashMap;
 
 use serde::{Deserialize, Serialize};
 use sqlx::FromRow;
+use utoipa::ToSchema;
 
 use super::{Db, Page, Result, StoreError, Tx};
 
 /// A content (wiki page) at its current revision.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, FromRow, ToSchema)]
 pub struct Content {
     /// Id.
     pub id: i64,
@@ -27,13 +28,15 @@ pub struct Content {
     /// Creator.
     pub created_by: i64,
     /// Creation time.
+    #[schema(format = DateTime)]
     pub created_at: String,
     /// Time of the current revision.
+    #[schema(format = DateTime)]
     pub updated_at: String,
 }
 
 /// A revision, in full.
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, FromRow, ToSchema)]
 pub struct Revision {
     /// Id of the revision row.
     pub id: i64,
@@ -54,11 +57,12 @@ pub struct Revision {
     /// Edit comment.
     pub comment: String,
     /// Time of the save.
+    #[schema(format = DateTime)]
     pub created_at: String,
 }
 
 /// A revision without its text (history lists).
-#[derive(Debug, Clone, Serialize, FromRow)]
+#[derive(Debug, Clone, Serialize, FromRow, ToSchema)]
 pub struct RevisionSummary {
     /// Id of the revision row.
     pub id: i64,
@@ -75,11 +79,12 @@ pub struct RevisionSummary {
     /// Size of the body in bytes.
     pub body_bytes: i64,
     /// Time of the save.
+    #[schema(format = DateTime)]
     pub created_at: String,
 }
 
 /// The editable text of a content.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, ToSchema)]
 pub struct ContentEdit {
     /// Title (required).
     pub title: String,

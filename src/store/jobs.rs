@@ -6,12 +6,13 @@
 use serde::{Deserialize, Serialize};
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
+use utoipa::ToSchema;
 
 use super::models::{self, BBox, Model, ModelStatus, NewModel};
 use super::{Db, Page, Result, StoreError, Tx};
 
 /// Where a job's input comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type, ToSchema)]
 #[serde(rename_all = "lowercase")]
 #[sqlx(rename_all = "lowercase")]
 pub enum JobKind {
@@ -35,7 +36,7 @@ impl JobKind {
 }
 
 /// State of a job.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type, ToSchema)]
 #[serde(rename_all = "lowercase")]
 #[sqlx(rename_all = "lowercase")]
 pub enum JobStatus {
@@ -73,7 +74,7 @@ impl JobStatus {
 }
 
 /// Build options of a job (stored as JSON).
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 pub struct JobOptions {
     /// Memory budget of the build, in bytes (default: the server's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -90,7 +91,7 @@ pub struct JobOptions {
 }
 
 /// A job.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Job {
     /// Id.
     pub id: i64,
@@ -109,7 +110,8 @@ pub struct Job {
     pub source_bytes: i64,
     /// Build options.
     pub options: JobOptions,
-    /// Current stage of the build (e.g. `reading PLY`, `partitioning`, `simplifying level 2`).
+    /// Current stage of the build (e.g. `import`, `generating`, `partitioning`,
+    /// `simplifying level 2`, `writing`, `thumbnail`, `done`).
     pub stage: String,
     /// Units of the current stage done.
     pub done: i64,
@@ -117,9 +119,10 @@ pub struct Job {
     pub total: i64,
     /// Estimate of the whole job's progress, 0–100.
     pub percent: f64,
-    /// Error or status message.
+    /// Error or status message (why it failed).
     pub message: Option<String>,
     /// The engine's build report once done.
+    #[schema(value_type = Option<Object>)]
     pub report: Option<serde_json::Value>,
     /// Times the job was started.
     pub attempts: i64,
@@ -128,12 +131,16 @@ pub struct Job {
     /// Creator.
     pub created_by: Option<i64>,
     /// Creation time.
+    #[schema(format = DateTime)]
     pub created_at: String,
     /// Start of the latest attempt.
+    #[schema(format = DateTime)]
     pub started_at: Option<String>,
     /// End time.
+    #[schema(format = DateTime)]
     pub finished_at: Option<String>,
     /// Last change (progress included).
+    #[schema(format = DateTime)]
     pub updated_at: String,
     /// Process running it.
     #[serde(skip)]

@@ -4,11 +4,12 @@
 use serde::{Deserialize, Serialize};
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
+use utoipa::ToSchema;
 
 use super::{Db, Page, Result, StoreError, Tx};
 
 /// Build state of a model.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type, ToSchema)]
 #[serde(rename_all = "lowercase")]
 #[sqlx(rename_all = "lowercase")]
 pub enum ModelStatus {
@@ -35,7 +36,7 @@ impl ModelStatus {
 }
 
 /// Axis-aligned bounding box.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BBox {
     /// Minimum corner (x, y, z).
     pub min: [f64; 3],
@@ -44,7 +45,7 @@ pub struct BBox {
 }
 
 /// A scan.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Model {
     /// Id.
     pub id: i64,
@@ -71,8 +72,10 @@ pub struct Model {
     /// Creator.
     pub created_by: i64,
     /// Creation time.
+    #[schema(format = DateTime)]
     pub created_at: String,
     /// Last change.
+    #[schema(format = DateTime)]
     pub updated_at: String,
 }
 
@@ -115,7 +118,7 @@ fn from_row(r: &SqliteRow) -> std::result::Result<Model, sqlx::Error> {
 }
 
 /// Fields of a new model.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, ToSchema)]
 pub struct NewModel {
     /// Title (required).
     pub title: String,
@@ -213,7 +216,7 @@ pub async fn list(db: &Db, page: Page) -> Result<Vec<Model>> {
 }
 
 /// Changes to a model's descriptive fields; `None` leaves a field as it is.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ModelPatch {
     /// New title.
@@ -222,6 +225,7 @@ pub struct ModelPatch {
     pub description: Option<String>,
     /// New thumbnail (`null` clears it).
     #[serde(default, with = "double_option")]
+    #[schema(value_type = Option<i64>)]
     pub thumbnail_attachment_id: Option<Option<i64>>,
 }
 

@@ -7,12 +7,14 @@
 use roaring::RoaringBitmap;
 use serde::Serialize;
 use sqlx::Row;
+use utoipa::ToSchema;
 
 use super::parts::{Camera, PartKind, Provenance, serialize_vertex_set};
 use super::{Db, Result, StoreError, Tx};
 
-/// One revision of a part (without its vertex set).
-#[derive(Debug, Clone, Serialize)]
+/// One revision of a part (without its vertex set, which
+/// `/api/v1/parts/{id}/revisions/{number}/vertices` serves).
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct PartRevision {
     /// Revision number (1 = creation).
     pub number: i64,
@@ -30,7 +32,9 @@ pub struct PartRevision {
     pub center: [f64; 3],
     /// Vertices at this revision.
     pub vertex_count: i64,
-    /// The view the selection was made from.
+    /// The view the selection was made from (a `ViewCamera`: eye, target, up, fovy,
+    /// width, height).
+    #[schema(value_type = Option<Object>)]
     pub view: Option<serde_json::Value>,
     /// Camera at this revision.
     pub camera: Option<Camera>,
@@ -41,6 +45,7 @@ pub struct PartRevision {
     /// Author's user name.
     pub author: Option<String>,
     /// Time.
+    #[schema(format = DateTime)]
     pub created_at: String,
 }
 

@@ -6,13 +6,14 @@ use roaring::RoaringBitmap;
 use serde::{Deserialize, Serialize};
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
+use utoipa::ToSchema;
 
 use super::models::double_option;
 use super::part_revisions::{self, Snapshot};
 use super::{Db, Result, StoreError, Tx};
 
 /// Kind of part.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, sqlx::Type, ToSchema)]
 #[serde(rename_all = "lowercase")]
 #[sqlx(rename_all = "lowercase")]
 pub enum PartKind {
@@ -38,7 +39,7 @@ impl PartKind {
 /// `crate::render::views`), recomputed whenever its vertex set changes; a camera given by a
 /// client (`auto` is then always false) is kept until a client changes it, and `null` in a
 /// patch hands the part back to the server's best view.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
     /// Eye position.
@@ -75,7 +76,7 @@ impl Camera {
 }
 
 /// An identified part.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Part {
     /// Id.
     pub id: i64,
@@ -94,8 +95,10 @@ pub struct Part {
     /// Creator.
     pub created_by: i64,
     /// Creation time.
+    #[schema(format = DateTime)]
     pub created_at: String,
     /// Last change.
+    #[schema(format = DateTime)]
     pub updated_at: String,
 }
 
@@ -123,7 +126,7 @@ fn from_row(r: &SqliteRow) -> std::result::Result<Part, sqlx::Error> {
 }
 
 /// Fields of a new part.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewPart {
     /// Point or region.
@@ -145,7 +148,7 @@ pub struct NewPart {
 }
 
 /// Changes to a part; `None` leaves a field as it is.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PartPatch {
     /// New kind.
@@ -154,11 +157,13 @@ pub struct PartPatch {
     pub center: Option<[f64; 3]>,
     /// New camera (`null` clears it).
     #[serde(default, with = "double_option")]
+    #[schema(value_type = Option<Camera>)]
     pub camera: Option<Option<Camera>>,
     /// New vertex set.
     pub vertex_ids: Option<Vec<u32>>,
     /// New thumbnail (`null` clears it).
     #[serde(default, with = "double_option")]
+    #[schema(value_type = Option<i64>)]
     pub thumbnail_attachment_id: Option<Option<i64>>,
     /// Comment of the edit, kept in the part's history.
     #[serde(default)]

@@ -3,11 +3,12 @@
 
 use actix_web::{HttpResponse, web};
 use serde::Deserialize;
+use utoipa::ToSchema;
 
 use super::auth::Auth;
 use super::{ApiError, AppState};
 use crate::app::events::{Event, EventKind};
-use crate::store::assignments;
+use crate::store::assignments::{self, AssignedContent, AssignedPart};
 use crate::store::contents;
 use crate::store::users::Role;
 
@@ -26,8 +27,13 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     .service(super::resource("/api/v1/contents/{id}/parts").route(web::get().to(parts_of)));
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(list, assign, reorder, unassign, parts_of))]
+pub(super) struct Api;
+
 /// Body of `POST /api/v1/parts/{id}/contents`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AssignRequest {
     /// Content to assign.
@@ -38,13 +44,18 @@ pub struct AssignRequest {
 }
 
 /// Body of `PUT /api/v1/parts/{id}/contents`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ReorderRequest {
     /// Every assigned content id, in the new order.
     pub content_ids: Vec<i64>,
 }
 
+/// Contents assigned to a part, in order.
+#[utoipa::path(get, path = "/api/v1/parts/{id}/contents", tag = "assignments",
+    params(("id" = i64, Path, description = "part id")),
+    responses((status = 200, description = "Assigned contents", body = Vec<AssignedContent>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn list(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -53,6 +64,17 @@ async fn list(
     Ok(HttpResponse::Ok().json(assignments::contents_for_part(&state.db, *part).await?))
 }
 
+/// Assign a content to a part
+///
+/// At `position` (1-based; default: last); the contents after it move down. A content that
+/// does not exist is a 400.
+#[utoipa::path(post, path = "/api/v1/parts/{id}/contents", tag = "assignments",
+    params(("id" = i64, Path, description = "part id")),
+    request_body = AssignRequest,
+    responses(
+        (status = 201, description = "The part's contents, in order", body = Vec<AssignedContent>),
+        (status = 409, description = "Already assigned", body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["editor"])))]
 async fn assign(
     state: web::Data<AppState>,
     auth: Auth,
@@ -66,6 +88,15 @@ async fn assign(
     Ok(HttpResponse::Created().json(assignments::contents_for_part(&state.db, *part).await?))
 }
 
+/// Reorder a part's contents
+///
+/// `content_ids` must name every content assigned to the part exactly once (400 otherwise).
+#[utoipa::path(put, path = "/api/v1/parts/{id}/contents", tag = "assignments",
+    params(("id" = i64, Path, description = "part id")),
+    request_body = ReorderRequest,
+    responses(
+        (status = 200, description = "The part's contents, in order", body = Vec<AssignedContent>)),
+    security(("sessionCookie" = ["editor"])))]
 async fn reorder(
     state: web::Data<AppState>,
     auth: Auth,
@@ -78,6 +109,15 @@ async fn reorder(
     Ok(HttpResponse::Ok().json(assignments::contents_for_part(&state.db, *part).await?))
 }
 
+/// Remove a content from a part
+///
+/// The content itself stays; the part's other contents close up.
+#[utoipa::path(delete, path = "/api/v1/parts/{id}/contents/{content_id}", tag = "assignments",
+    params(
+        ("id" = i64, Path, description = "part id"),
+        ("content_id" = i64, Path, description = "content id")),
+    responses((status = 204, description = "Removed")),
+    security(("sessionCookie" = ["editor"])))]
 async fn unassign(
     state: web::Data<AppState>,
     auth: Auth,
@@ -91,6 +131,11 @@ async fn unassign(
     Ok(HttpResponse::NoContent().finish())
 }
 
+/// Parts a content is assigned to.
+#[utoipa::path(get, path = "/api/v1/contents/{id}/parts", tag = "assignments",
+    params(("id" = i64, Path, description = "content id")),
+    responses((status = 200, description = "Parts", body = Vec<AssignedPart>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn parts_of(
     state: web::Data<AppState>,
     _auth: Auth,

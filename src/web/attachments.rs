@@ -11,6 +11,7 @@ use actix_web::http::header;
 use actix_web::{HttpResponse, web};
 use futures_util::StreamExt;
 use tokio::io::AsyncReadExt;
+use utoipa::ToSchema;
 
 use super::auth::Auth;
 use super::multipart::{TextFields, multipart_error, spool};
@@ -36,6 +37,44 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
                 .route(web::put().to(link))
                 .route(web::delete().to(unlink)),
         );
+}
+
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(
+    upload,
+    get,
+    download,
+    list_for_content,
+    upload_to_content,
+    link,
+    unlink
+))]
+pub(super) struct Api;
+
+/// The multipart form of `POST /api/v1/attachments` (documentation only; [`receive`] reads
+/// it as a stream).
+#[derive(ToSchema)]
+pub struct AttachmentUpload {
+    /// The file: exactly one file part (named `file`, or any part with a file name). Its file
+    /// name is kept for display only; its declared media type is kept when well-formed, else
+    /// guessed from the name.
+    #[schema(value_type = String, format = Binary)]
+    pub file: Vec<u8>,
+    /// Attach the upload to this content, at the end of its list (a text field; empty means
+    /// none).
+    pub content_id: Option<i64>,
+}
+
+/// The multipart form of `POST /api/v1/contents/{id}/attachments` (documentation only;
+/// [`receive`] reads it as a stream).
+#[derive(ToSchema)]
+pub struct ContentAttachmentUpload {
+    /// The file: exactly one file part (named `file`, or any part with a file name). Its file
+    /// name is kept for display only; its declared media type is kept when well-formed, else
+    /// guessed from the name.
+    #[schema(value_type = String, format = Binary)]
+    pub file: Vec<u8>,
 }
 
 /// A file received from a multipart upload, stored under its content address.
@@ -154,6 +193,17 @@ pub async fn receive(
     Ok(Received { attachment, fields })
 }
 
+/// Upload a file
+///
+/// Multipart field `file`, optional field `content_id` to attach it to a content. The file is
+/// stored under its SHA-256 (content address); its name is kept for display only.
+#[utoipa::path(post, path = "/api/v1/attachments", tag = "attachments",
+    request_body(content = inline(AttachmentUpload), content_type = "multipart/form-data"),
+    responses(
+        (status = 201, description = "Uploaded", body = Attachment),
+        (status = 413, description = "File larger than the upload limit, or too many or too \
+            large text fields", body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["editor"])))]
 async fn upload(
     state: web::Data<AppState>,
     auth: Auth,
@@ -175,6 +225,17 @@ async fn upload(
     Ok(HttpResponse::Created().json(a))
 }
 
+/// Upload a file and attach it to a content
+///
+/// Multipart field `file`; the attachment goes at the end of the content's list.
+#[utoipa::path(post, path = "/api/v1/contents/{id}/attachments", tag = "attachments",
+    params(("id" = i64, Path, description = "content id")),
+    request_body(content = inline(ContentAttachmentUpload), content_type = "multipart/form-data"),
+    responses(
+        (status = 201, description = "Uploaded", body = Attachment),
+        (status = 413, description = "File larger than the upload limit, or too many or too \
+            large text fields", body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["editor"])))]
 async fn upload_to_content(
     state: web::Data<AppState>,
     auth: Auth,
@@ -189,6 +250,11 @@ async fn upload_to_content(
     Ok(HttpResponse::Created().json(a))
 }
 
+/// Attachment metadata.
+#[utoipa::path(get, path = "/api/v1/attachments/{id}", tag = "attachments",
+    params(("id" = i64, Path, description = "attachment id")),
+    responses((status = 200, description = "The attachment", body = Attachment)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -271,6 +337,21 @@ pub async fn serve_file(state: &AppState, a: &Attachment) -> Result<HttpResponse
         .body(SizedStream::new(len, Box::pin(stream))))
 }
 
+/// Download the file
+///
+/// Sent as its stored media type with `X-Content-Type-Options: nosniff` and a sandboxing
+/// `Content-Security-Policy`; passive types (common images, audio, video, plain text) inline,
+/// active ones (HTML, SVG, JS, PDF, ...) with `Content-Disposition: attachment`.
+#[utoipa::path(get, path = "/api/v1/attachments/{id}/download", tag = "attachments",
+    params(("id" = i64, Path, description = "attachment id")),
+    responses((status = 200, description = "The file", body = super::openapi::Binary,
+        content_type = "*/*",
+        headers(
+            ("Content-Disposition" = String,
+                description = "`inline` or `attachment`, with the original file name"),
+            ("ETag" = String, description = "The SHA-256 of the file, quoted"),
+            ("X-Content-Type-Options" = String, description = "`nosniff`")))),
+    security(("sessionCookie" = ["viewer"])))]
 async fn download(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -280,6 +361,11 @@ async fn download(
     serve_file(&state, &a).await
 }
 
+/// Attachments of a content, in order.
+#[utoipa::path(get, path = "/api/v1/contents/{id}/attachments", tag = "attachments",
+    params(("id" = i64, Path, description = "content id")),
+    responses((status = 200, description = "Attachments", body = Vec<Attachment>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn list_for_content(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -289,6 +375,19 @@ async fn list_for_content(
     Ok(HttpResponse::Ok().json(attachments::list_for_content(&state.db, *id).await?))
 }
 
+/// Attach an existing attachment
+///
+/// At the end of the content's list.
+#[utoipa::path(put, path = "/api/v1/contents/{id}/attachments/{attachment_id}",
+    tag = "attachments",
+    params(
+        ("id" = i64, Path, description = "content id"),
+        ("attachment_id" = i64, Path, description = "attachment id")),
+    responses(
+        (status = 200, description = "Attachments of the content, in order",
+            body = Vec<Attachment>),
+        (status = 409, description = "Already attached", body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["editor"])))]
 async fn link(
     state: web::Data<AppState>,
     auth: Auth,
@@ -302,6 +401,16 @@ async fn link(
     Ok(HttpResponse::Ok().json(attachments::list_for_content(&state.db, content).await?))
 }
 
+/// Detach an attachment
+///
+/// The attachment itself stays (other contents or thumbnails may use it).
+#[utoipa::path(delete, path = "/api/v1/contents/{id}/attachments/{attachment_id}",
+    tag = "attachments",
+    params(
+        ("id" = i64, Path, description = "content id"),
+        ("attachment_id" = i64, Path, description = "attachment id")),
+    responses((status = 204, description = "Detached")),
+    security(("sessionCookie" = ["editor"])))]
 async fn unlink(
     state: web::Data<AppState>,
     auth: Auth,

@@ -4,12 +4,13 @@
 
 use actix_web::{HttpResponse, web};
 use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Auth;
 use super::{ApiError, AppState, PageQuery};
 use crate::app::events::{Event, EventKind};
 use crate::store::attachments::{self, Attachment};
-use crate::store::contents::{self, Content, ContentEdit, Revision};
+use crate::store::contents::{self, Content, ContentEdit, Revision, RevisionSummary};
 use crate::store::models::double_option;
 use crate::store::users::Role;
 use crate::wiki::{diff, markdown};
@@ -36,8 +37,24 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     .service(super::resource("/api/v1/contents/{id}/revert").route(web::post().to(revert)));
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(
+    list,
+    create,
+    preview,
+    get,
+    save,
+    delete,
+    revisions,
+    revision,
+    diff_revisions,
+    revert
+))]
+pub(super) struct Api;
+
 /// A content with its rendered body.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, ToSchema)]
 pub struct ContentView {
     /// The content.
     #[serde(flatten)]
@@ -60,7 +77,7 @@ impl ContentView {
 }
 
 /// Body of `POST /api/v1/contents`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewContent {
     /// Title.
@@ -80,7 +97,7 @@ pub struct NewContent {
 }
 
 /// Body of `PUT /api/v1/contents/{id}`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SaveContent {
     /// The revision this edit is based on.
@@ -98,6 +115,7 @@ pub struct SaveContent {
     pub comment: String,
     /// New thumbnail (`null` clears; absent leaves it).
     #[serde(default, with = "double_option")]
+    #[schema(value_type = Option<i64>)]
     pub thumbnail_attachment_id: Option<Option<i64>>,
 }
 
@@ -106,6 +124,13 @@ fn validate(state: &AppState, edit: &ContentEdit) -> Result<(), ApiError> {
     Ok(edit.validate(l.title_chars, l.body_bytes)?)
 }
 
+/// List contents
+///
+/// Most recently changed first, each with its rendered HTML (without attachments).
+#[utoipa::path(get, path = "/api/v1/contents", tag = "contents",
+    params(PageQuery),
+    responses((status = 200, description = "Contents", body = Vec<ContentView>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn list(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -119,6 +144,13 @@ async fn list(
     Ok(HttpResponse::Ok().json(items))
 }
 
+/// Create a content
+///
+/// The creation is revision 1, with the author and the optional comment.
+#[utoipa::path(post, path = "/api/v1/contents", tag = "contents",
+    request_body = NewContent,
+    responses((status = 201, description = "Created", body = ContentView)),
+    security(("sessionCookie" = ["editor"])))]
 async fn create(
     state: web::Data<AppState>,
     auth: Auth,
@@ -139,6 +171,11 @@ async fn create(
     Ok(HttpResponse::Created().json(ContentView::new(content, Some(Vec::new()))))
 }
 
+/// Get a content with its rendered HTML and attachments.
+#[utoipa::path(get, path = "/api/v1/contents/{id}", tag = "contents",
+    params(("id" = i64, Path, description = "content id")),
+    responses((status = 200, description = "The content", body = ContentView)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -149,6 +186,19 @@ async fn get(
     Ok(HttpResponse::Ok().json(ContentView::new(content, Some(att))))
 }
 
+/// Save a new revision
+///
+/// The edit names the revision it is based on (`base_revision`); when that is no longer the
+/// current revision the save is refused with 409 and both versions (never a lost update).
+#[utoipa::path(put, path = "/api/v1/contents/{id}", tag = "contents",
+    params(("id" = i64, Path, description = "content id")),
+    request_body = SaveContent,
+    responses(
+        (status = 200, description = "Saved", body = ContentView),
+        (status = 409, description = "Edit conflict: `base_revision` is not the current \
+            revision; the body carries the current revision and the rejected edit",
+            body = super::error::EditConflict)),
+    security(("sessionCookie" = ["editor"])))]
 async fn save(
     state: web::Data<AppState>,
     auth: Auth,
@@ -182,6 +232,13 @@ async fn save(
     Ok(HttpResponse::Ok().json(ContentView::new(content, Some(att))))
 }
 
+/// Delete a content
+///
+/// With its history, assignments and attachment links (the attachments themselves stay).
+#[utoipa::path(delete, path = "/api/v1/contents/{id}", tag = "contents",
+    params(("id" = i64, Path, description = "content id")),
+    responses((status = 204, description = "Deleted")),
+    security(("sessionCookie" = ["admin"])))]
 async fn delete(
     state: web::Data<AppState>,
     auth: Auth,
@@ -196,6 +253,11 @@ async fn delete(
     Ok(HttpResponse::NoContent().finish())
 }
 
+/// History of a content, newest first.
+#[utoipa::path(get, path = "/api/v1/contents/{id}/revisions", tag = "contents",
+    params(("id" = i64, Path, description = "content id")),
+    responses((status = 200, description = "Revisions", body = Vec<RevisionSummary>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn revisions(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -205,13 +267,22 @@ async fn revisions(
 }
 
 /// A revision with its rendered body.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, ToSchema)]
 struct RevisionView {
+    /// The revision.
     #[serde(flatten)]
     revision: Revision,
+    /// Sanitised HTML of the revision's body.
     html: String,
 }
 
+/// One revision in full, with rendered HTML.
+#[utoipa::path(get, path = "/api/v1/contents/{id}/revisions/{number}", tag = "contents",
+    params(
+        ("id" = i64, Path, description = "content id"),
+        ("number" = i64, Path, description = "revision number")),
+    responses((status = 200, description = "The revision", body = RevisionView)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn revision(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -226,7 +297,8 @@ async fn revision(
 }
 
 /// `from` / `to` revision numbers of a diff.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct DiffQuery {
     /// Older revision (default: the one before `to`).
     pub from: Option<i64>,
@@ -235,7 +307,7 @@ pub struct DiffQuery {
 }
 
 /// Diff of one field.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, ToSchema)]
 pub struct FieldDiff {
     /// Value at `from`.
     pub from: String,
@@ -246,7 +318,7 @@ pub struct FieldDiff {
 }
 
 /// Diff between two revisions.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, ToSchema)]
 pub struct RevisionDiff {
     /// Content id.
     pub content_id: i64,
@@ -288,6 +360,14 @@ pub async fn diff_of(state: &AppState, id: i64, q: &DiffQuery) -> Result<Revisio
     })
 }
 
+/// Diff between two revisions
+///
+/// Of the title, the caption and the body (an HTML table with changed words marked, a
+/// unified diff, line counts). Defaults: from the revision before `to`, to the current one.
+#[utoipa::path(get, path = "/api/v1/contents/{id}/diff", tag = "contents",
+    params(("id" = i64, Path, description = "content id"), DiffQuery),
+    responses((status = 200, description = "The diff", body = RevisionDiff)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn diff_revisions(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -298,7 +378,7 @@ async fn diff_revisions(
 }
 
 /// Body of `POST /api/v1/contents/{id}/revert`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RevertRequest {
     /// Revision to restore.
@@ -311,6 +391,20 @@ pub struct RevertRequest {
     pub comment: Option<String>,
 }
 
+/// Revert to an old revision
+///
+/// Saves a copy of the old revision's text as a new revision (the thumbnail is left as it
+/// is). With `base_revision`, the save is refused with 409 unless that is the current
+/// revision.
+#[utoipa::path(post, path = "/api/v1/contents/{id}/revert", tag = "contents",
+    params(("id" = i64, Path, description = "content id")),
+    request_body = RevertRequest,
+    responses(
+        (status = 200, description = "Reverted", body = ContentView),
+        (status = 409, description = "Edit conflict: `base_revision` is not the current \
+            revision; the body carries the current revision (`yours` is null)",
+            body = super::error::EditConflict)),
+    security(("sessionCookie" = ["editor"])))]
 async fn revert(
     state: web::Data<AppState>,
     auth: Auth,
@@ -336,12 +430,29 @@ async fn revert(
 }
 
 /// Body of `POST /api/v1/preview`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, ToSchema)]
 pub struct PreviewRequest {
     /// Markdown to render.
     pub body: String,
 }
 
+/// Answer of `POST /api/v1/preview`.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PreviewHtml {
+    /// Sanitised HTML of the Markdown, as a content's `html`.
+    pub html: String,
+}
+
+/// Render Markdown to sanitised HTML
+///
+/// As a content's body would be rendered; nothing is saved.
+#[utoipa::path(post, path = "/api/v1/preview", tag = "contents",
+    request_body = PreviewRequest,
+    responses(
+        (status = 200, description = "The HTML", body = PreviewHtml),
+        (status = 413, description = "Body larger than the content body limit",
+            body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn preview(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -350,5 +461,7 @@ async fn preview(
     if body.body.len() > state.settings.limits.body_bytes {
         return Err(ApiError::PayloadTooLarge("body too large".into()));
     }
-    Ok(HttpResponse::Ok().json(serde_json::json!({ "html": markdown::render(&body.body) })))
+    Ok(HttpResponse::Ok().json(PreviewHtml {
+        html: markdown::render(&body.body),
+    }))
 }

@@ -6,12 +6,28 @@ use actix_web::http::StatusCode;
 use actix_web::http::header::{self, ContentType};
 use actix_web::{HttpRequest, HttpResponse, ResponseError};
 use askama::Template;
-use serde_json::json;
+use serde::Serialize;
+use utoipa::ToSchema;
 
 use crate::app::AppError;
 use crate::search::SearchError;
 use crate::store::StoreError;
 use crate::store::contents::{ContentEdit, Revision};
+
+/// The 409 body of a content save based on a stale revision: both versions, to merge.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct EditConflict {
+    /// What went wrong, for people.
+    pub error: String,
+    /// The revision the rejected save was based on.
+    pub base_revision: i64,
+    /// The number of the current revision.
+    pub current_revision: i64,
+    /// The current revision in full ("theirs").
+    pub current: Revision,
+    /// The rejected edit ("yours"); `null` for a revert.
+    pub yours: Option<ContentEdit>,
+}
 
 /// An error of an API route.
 #[derive(Debug)]
@@ -143,18 +159,6 @@ impl ResponseError for ApiError {
     }
 
     fn error_response(&self) -> HttpResponse {
-        let mut body = json!({ "error": self.message() });
-        if let ApiError::StaleRevision {
-            base,
-            current,
-            yours,
-        } = self
-        {
-            body["base_revision"] = json!(base);
-            body["current_revision"] = json!(current.number);
-            body["current"] = json!(current);
-            body["yours"] = json!(yours);
-        }
         let mut resp = HttpResponse::build(self.status_code());
         resp.insert_header((header::CACHE_CONTROL, "no-store"));
         if let Some(secs) = self.retry_after() {
@@ -163,7 +167,22 @@ impl ResponseError for ApiError {
         if matches!(self, ApiError::Unauthorized) {
             resp.insert_header((header::WWW_AUTHENTICATE, "Cookie realm=\"meshwiki\""));
         }
-        resp.json(body)
+        match self {
+            ApiError::StaleRevision {
+                base,
+                current,
+                yours,
+            } => resp.json(EditConflict {
+                error: self.message(),
+                base_revision: *base,
+                current_revision: current.number,
+                current: Revision::clone(current),
+                yours: yours.as_deref().cloned(),
+            }),
+            _ => resp.json(super::openapi::ErrorBody {
+                error: self.message(),
+            }),
+        }
     }
 }
 

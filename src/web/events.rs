@@ -26,6 +26,13 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     cfg.service(super::resource("/api/v1/models/{id}/events").route(web::get().to(events)));
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]), with the
+/// `ChangeEvent` schema of the `change` messages' data (a stream has no JSON body to
+/// collect it from).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(events), components(schemas(Event)))]
+pub(super) struct Api;
+
 struct StreamState {
     rx: broadcast::Receiver<Event>,
     model_id: i64,
@@ -69,7 +76,26 @@ async fn next_chunk(
     }
 }
 
-/// `GET /api/v1/models/{id}/events`: `text/event-stream` of `change` messages for the model.
+/// Live changes of a model's parts and their information
+///
+/// A `text/event-stream` (server-sent events) telling an open viewer that a part, its assigned
+/// information or a content changed, so it can refetch what it shows:
+///
+/// - `hello` first, with data `{"model_id": N}` (and `retry: 2000`, the reconnection delay in
+///   milliseconds);
+/// - `change` messages whose data is a `ChangeEvent` (JSON; see the schema of that name):
+///   the model's part events and every content event (contents may be assigned to parts of
+///   any model);
+/// - `resync` with data `{"missed": N}` when the client fell behind and must reload
+///   everything;
+/// - keep-alive comments (`: keep-alive`) every 15 s.
+#[utoipa::path(get, path = "/api/v1/models/{id}/events", tag = "models",
+    params(("id" = i64, Path, description = "model id")),
+    responses((status = 200,
+        description = "Event stream: `hello`, then `change` messages with a ChangeEvent as \
+            data, `resync` and keep-alive comments",
+        body = String, content_type = "text/event-stream")),
+    security(("sessionCookie" = ["viewer"])))]
 async fn events(
     state: web::Data<AppState>,
     _auth: Auth,

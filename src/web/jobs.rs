@@ -12,15 +12,16 @@
 use actix_web::http::header;
 use actix_web::{HttpRequest, HttpResponse, web};
 use futures_util::{Stream, StreamExt};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
+use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Auth;
 use super::multipart;
 use super::{ApiError, AppState, PageQuery};
 use crate::jobs::{JobError, ReceivedScan, SCAN_EXTENSIONS, scan_extension};
-use crate::store::jobs::{self, CancelOutcome, JobStatus};
-use crate::store::models::NewModel;
+use crate::store::jobs::{self, CancelOutcome, Job, JobStatus};
+use crate::store::models::{Model, NewModel};
 use crate::store::users::Role;
 
 /// Mounts the routes (before `models`: `/api/v1/models/upload` must win over `/{id}`).
@@ -30,6 +31,11 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
         .service(super::resource("/api/v1/jobs/{id}").route(web::get().to(get)))
         .service(super::resource("/api/v1/jobs/{id}/cancel").route(web::post().to(cancel)));
 }
+
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(upload, list, get, cancel))]
+pub(super) struct Api;
 
 impl From<JobError> for ApiError {
     fn from(e: JobError) -> ApiError {
@@ -92,14 +98,44 @@ pub(crate) fn extension_of(filename: &str) -> Result<String, ApiError> {
 }
 
 /// Query of the raw upload.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 struct UploadQuery {
+    /// Title of the new model (1–300 characters).
+    #[param(value_type = String, required = true)]
     title: Option<String>,
+    /// The scan's file name: only its extension (.ply, .obj, .gltf, .glb, .stl, .off) is
+    /// used, to pick the format; it is shown to users but never used as a path.
+    #[param(value_type = String, required = true)]
     filename: Option<String>,
+    /// Description of the model (Markdown).
     #[serde(default)]
     description: String,
 }
 
+/// What an upload created: the model (status `pending`) and the job that builds it.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct UploadedModel {
+    /// The new model.
+    pub model: Model,
+    /// Its build job (poll `GET /api/v1/jobs/{id}` for its progress).
+    pub job: Job,
+}
+
+/// Upload a scan and queue its LOD build
+///
+/// The raw request body is the scan, streamed to disk (never held in memory); then a model
+/// (status `pending`) and its build job are created. The `Location` header names the job.
+#[utoipa::path(post, path = "/api/v1/models/upload", tag = "jobs",
+    params(UploadQuery),
+    request_body(content = super::openapi::Binary, content_type = "application/octet-stream",
+        description = "The scan file"),
+    responses(
+        (status = 202, description = "Queued", body = UploadedModel,
+            headers(("Location" = String, description = "The job: /api/v1/jobs/{id}"))),
+        (status = 413, description = "Larger than --max-model-upload-mb",
+            body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["admin"])))]
 async fn upload(
     state: web::Data<AppState>,
     auth: Auth,
@@ -137,14 +173,18 @@ async fn upload(
     let (model, job) = state.jobs.submit_upload(scan, &model, auth.id()).await?;
     Ok(HttpResponse::Accepted()
         .insert_header((header::LOCATION, format!("/api/v1/jobs/{}", job.id)))
-        .json(json!({ "model": model, "job": job })))
+        .json(UploadedModel { model, job }))
 }
 
 /// Query of the job list.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 struct ListQuery {
+    /// Only jobs in this state (queued, running, done, failed, cancelled).
     status: Option<String>,
+    /// Rows to return (1–1000, default 100).
     limit: Option<i64>,
+    /// Rows to skip.
     offset: Option<i64>,
 }
 
@@ -156,6 +196,13 @@ fn parse_status(s: &str) -> Result<JobStatus, ApiError> {
     })
 }
 
+/// List build jobs
+///
+/// Newest first, optionally only those in one state.
+#[utoipa::path(get, path = "/api/v1/jobs", tag = "jobs",
+    params(ListQuery),
+    responses((status = 200, description = "Jobs, newest first", body = Vec<Job>)),
+    security(("sessionCookie" = ["admin"])))]
 async fn list(
     state: web::Data<AppState>,
     auth: Auth,
@@ -171,6 +218,13 @@ async fn list(
     Ok(HttpResponse::Ok().json(jobs::list(&state.db, status, page).await?))
 }
 
+/// A build job with its progress
+///
+/// Poll it while it runs.
+#[utoipa::path(get, path = "/api/v1/jobs/{id}", tag = "jobs",
+    params(("id" = i64, Path, description = "job id")),
+    responses((status = 200, description = "The job", body = Job)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -179,6 +233,18 @@ async fn get(
     Ok(HttpResponse::Ok().json(jobs::get(&state.db, *id).await?))
 }
 
+/// Cancel a build job
+///
+/// A queued job is cancelled at once (200), a running one stops within about a second (202);
+/// its model becomes `failed` and nothing is left on disk.
+#[utoipa::path(post, path = "/api/v1/jobs/{id}/cancel", tag = "jobs",
+    params(("id" = i64, Path, description = "job id")),
+    responses(
+        (status = 200, description = "Cancelled", body = Job),
+        (status = 202, description = "Cancellation requested", body = Job),
+        (status = 409, description = "The job has already ended",
+            body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["admin"])))]
 async fn cancel(
     state: web::Data<AppState>,
     auth: Auth,

@@ -14,6 +14,7 @@ use actix_web::http::{StatusCode, header};
 use actix_web::{HttpRequest, HttpResponse, web};
 use meshwiki_engine::lod::{FormatError, LodFile, NO_GROUP};
 use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Auth;
 use super::{ApiError, AppState};
@@ -37,70 +38,128 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
         .service(super::resource("/api/v1/models/{id}/lod/file").route(web::get().to(file)));
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(hierarchy, patch, file))]
+pub(super) struct Api;
+
 fn lod_error(e: FormatError) -> ApiError {
     ApiError::internal(format!("LOD file unreadable: {e}"))
 }
 
 // ---- JSON encoding -------------------------------------------------------------------------
 
-#[derive(Serialize)]
-struct BBoxJson {
-    min: [f32; 3],
-    max: [f32; 3],
+/// Axis-aligned bounding box of the model (from the file's header).
+#[derive(Debug, Serialize, ToSchema)]
+#[schema(as = LodBBox)]
+pub struct BBoxJson {
+    /// Minimum corner x, y, z.
+    pub min: [f32; 3],
+    /// Maximum corner x, y, z.
+    pub max: [f32; 3],
 }
 
-#[derive(Serialize)]
-struct GridJson {
-    origin: [f64; 3],
-    step: f64,
+/// The quantisation grid: world = `origin` + `step` × grid coordinate.
+#[derive(Debug, Serialize, ToSchema)]
+#[schema(as = LodGrid)]
+pub struct GridJson {
+    /// Grid origin x, y, z.
+    pub origin: [f64; 3],
+    /// Grid step (world units).
+    pub step: f64,
 }
 
-#[derive(Serialize)]
-struct NodeJson {
-    id: u32,
-    level: u32,
-    triangles: u32,
-    vertices: u32,
-    bounds: [f32; 4],
-    cone: [f32; 4],
-    lod_sphere: [f32; 4],
-    lod_error: f32,
-    parent_sphere: [f32; 4],
-    parent_error: Option<f32>,
-    producer: Option<u32>,
-    member_of: Option<u32>,
-    offset: u64,
-    length: u32,
-    crc32: u32,
+/// One node (patch) of the DAG. Spheres and bounds are `[x, y, z, r]`.
+#[derive(Debug, Serialize, ToSchema)]
+#[schema(as = LodNode)]
+pub struct NodeJson {
+    /// Node id (its index; patches are in locality order, coarse levels first).
+    pub id: u32,
+    /// Level (0 = leaf).
+    pub level: u32,
+    /// Triangle count.
+    pub triangles: u32,
+    /// Vertex count.
+    pub vertices: u32,
+    /// Tight bounding sphere x, y, z, radius (culling).
+    pub bounds: [f32; 4],
+    /// Normal cone: axis x, y, z, cutoff (cutoff 1 = never back-facing).
+    pub cone: [f32; 4],
+    /// Sphere of the group that produced the node.
+    pub lod_sphere: [f32; 4],
+    /// Error of the group that produced the node (0 for leaves).
+    pub lod_error: f32,
+    /// Sphere of the group the node is a member of.
+    pub parent_sphere: [f32; 4],
+    /// Error of the group the node is a member of; `null` for roots (+∞).
+    pub parent_error: Option<f32>,
+    /// Group that produced the node; `null` for leaves.
+    pub producer: Option<u32>,
+    /// Group the node is a member of; `null` for roots.
+    pub member_of: Option<u32>,
+    /// Offset of its patch blob, absolute in the file.
+    pub offset: u64,
+    /// Length of its patch blob in bytes.
+    pub length: u32,
+    /// Unsigned CRC-32 (IEEE) of the blob's `length` bytes (also its ETag).
+    pub crc32: u32,
 }
 
-#[derive(Serialize)]
-struct GroupJson<'a> {
-    id: u32,
-    level: u32,
-    sphere: [f32; 4],
-    error: f32,
-    members: &'a [u32],
-    products: &'a [u32],
+/// One group: neighbouring patches (`members`) merged, simplified and split again into
+/// `products` one level up.
+#[derive(Debug, Serialize, ToSchema)]
+#[schema(as = LodGroup)]
+pub struct GroupJson {
+    /// Group id (its index).
+    pub id: u32,
+    /// Level of its members.
+    pub level: u32,
+    /// Bounding sphere x, y, z, r (the members' `parent_sphere`, the products' `lod_sphere`).
+    pub sphere: [f32; 4],
+    /// Error (the members' `parent_error`, the products' `lod_error`).
+    pub error: f32,
+    /// Node ids of its members.
+    pub members: Vec<u32>,
+    /// Node ids of its products.
+    pub products: Vec<u32>,
 }
 
-#[derive(Serialize)]
-struct HierarchyJson<'a> {
-    version: u32,
-    node_count: u32,
-    group_count: u32,
-    level_count: u32,
-    root_count: u32,
-    max_patch_triangles: u32,
-    input_vertices: u64,
-    input_triangles: u64,
-    bbox: BBoxJson,
-    grid: GridJson,
-    has_colors: bool,
-    has_normals: bool,
-    file_bytes: u64,
-    nodes: Vec<NodeJson>,
-    groups: Vec<GroupJson<'a>>,
+/// A model's LOD hierarchy as JSON (`docs/FORMAT.md`, "HTTP"): the file's header, its nodes
+/// and its groups. Cut rule: for a threshold τ a node is drawn iff
+/// `lod_error <= τ < parent_error`.
+#[derive(Debug, Serialize, ToSchema)]
+#[schema(as = LodHierarchy)]
+pub struct HierarchyJson {
+    /// Format version (1).
+    pub version: u32,
+    /// Number of nodes (patches).
+    pub node_count: u32,
+    /// Number of groups.
+    pub group_count: u32,
+    /// Number of levels.
+    pub level_count: u32,
+    /// Number of roots.
+    pub root_count: u32,
+    /// Most triangles in one patch.
+    pub max_patch_triangles: u32,
+    /// Vertices of the input scan.
+    pub input_vertices: u64,
+    /// Triangles of the input scan.
+    pub input_triangles: u64,
+    /// Bounding box.
+    pub bbox: BBoxJson,
+    /// Quantisation grid.
+    pub grid: GridJson,
+    /// Whether patches carry vertex colours.
+    pub has_colors: bool,
+    /// Whether patches carry normals.
+    pub has_normals: bool,
+    /// Size of the whole file in bytes.
+    pub file_bytes: u64,
+    /// Nodes, by id.
+    pub nodes: Vec<NodeJson>,
+    /// Groups, by id.
+    pub groups: Vec<GroupJson>,
 }
 
 fn group_ref(g: u32) -> Option<u32> {
@@ -141,8 +200,8 @@ pub fn hierarchy_json(lod: &LodFile) -> Result<Vec<u8>, serde_json::Error> {
             level: g.level,
             sphere: g.sphere,
             error: g.error,
-            members: lod.members(g),
-            products: lod.products(g),
+            members: lod.members(g).to_vec(),
+            products: lod.products(g).to_vec(),
         })
         .collect();
     serde_json::to_vec(&HierarchyJson {
@@ -294,7 +353,7 @@ fn serve_bytes(
             return HttpResponse::RangeNotSatisfiable()
                 .insert_header((header::CONTENT_RANGE, format!("bytes */{len}")))
                 .insert_header((header::CACHE_CONTROL, "no-store"))
-                .json(serde_json::json!({ "error": msg }));
+                .json(super::openapi::ErrorBody { error: msg });
         }
     };
     let mut resp = HttpResponse::build(status);
@@ -331,12 +390,53 @@ fn serve_bytes(
 // ---- handlers ------------------------------------------------------------------------------
 
 /// `?format=` of the hierarchy route.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct FormatQuery {
-    /// `json` (default) or `binary`.
+    /// `json` (default) or `binary` (the file's header and tables as
+    /// `application/octet-stream`).
     pub format: Option<String>,
 }
 
+/// The model's LOD hierarchy
+///
+/// The DAG of `docs/FORMAT.md` ("HTTP") as JSON, or with `format=binary` the file's header
+/// and tables exactly as in the file (its first `blobs_offset` bytes) as
+/// `application/octet-stream`. `ETag` (the file's tag, with `-json` added for the JSON);
+/// `If-None-Match` with a matching tag (or `*`) answers 304; `Cache-Control: private,
+/// no-cache`. The binary form also takes one byte range, as `/lod/file` does.
+#[utoipa::path(get, path = "/api/v1/models/{id}/lod", tag = "lod",
+    params(
+        ("id" = i64, Path, description = "model id"),
+        FormatQuery,
+        ("Range" = Option<String>, Header,
+            description = "`format=binary` only: bytes=a-b, bytes=a- or bytes=-n"),
+        ("If-Range" = Option<String>, Header,
+            description = "`format=binary` only: serve the range only while the ETag is this one"),
+        ("If-None-Match" = Option<String>, Header, description = "an ETag seen before, or `*`"),
+    ),
+    responses(
+        (status = 200, description = "The hierarchy (JSON), or its binary header and tables",
+            content(
+                (HierarchyJson = "application/json"),
+                (super::openapi::Binary = "application/octet-stream"),
+            ),
+            headers(
+                ("ETag" = String, description = "strong tag of the file (`\"<crc>-<len hex>\"`), `-json` added for the JSON"),
+                ("Cache-Control" = String, description = "`private, no-cache`"),
+            )),
+        (status = 206, description = "`format=binary`: a range of the header and tables (Content-Range)",
+            body = super::openapi::Binary, content_type = "application/octet-stream",
+            headers(("Content-Range" = String, description = "bytes a-b/length"))),
+        (status = 304, description = "Not modified (If-None-Match)",
+            headers(("ETag" = String, description = "the current tag"))),
+        (status = 409, description = "The model is not ready (pending, building or failed)",
+            body = super::openapi::ErrorBody),
+        (status = 416, description = "`format=binary`: the range starts beyond the end (Content-Range: bytes */length)",
+            body = super::openapi::ErrorBody,
+            headers(("Content-Range" = String, description = "bytes */length"))),
+    ),
+    security(("sessionCookie" = ["viewer"])))]
 async fn hierarchy(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -384,6 +484,42 @@ async fn hierarchy(
         .body(body))
 }
 
+/// One patch blob
+///
+/// The blob of node `node` (`docs/FORMAT.md`, "Patch blob"), `application/octet-stream`,
+/// `Content-Encoding: identity` (blobs are compressed already). `ETag` = its CRC-32 as 8
+/// lower-case hex digits; `Cache-Control: public, max-age=31536000, immutable` (a node's
+/// blob never changes for a model); `If-None-Match` gives 304. One byte range per request
+/// (206; 416 when it starts beyond the end; a malformed or multiple range is ignored: 200);
+/// `If-Range` with another tag serves the whole blob.
+#[utoipa::path(get, path = "/api/v1/models/{id}/lod/patches/{node}", tag = "lod",
+    params(
+        ("id" = i64, Path, description = "model id"),
+        ("node" = u32, Path, description = "node (patch) id, 0 to node_count - 1"),
+        ("Range" = Option<String>, Header, description = "bytes=a-b, bytes=a- or bytes=-n"),
+        ("If-Range" = Option<String>, Header, description = "serve the range only while the ETag is this one"),
+        ("If-None-Match" = Option<String>, Header, description = "an ETag seen before, or `*`"),
+    ),
+    responses(
+        (status = 200, description = "The blob", body = super::openapi::Binary,
+            content_type = "application/octet-stream",
+            headers(
+                ("ETag" = String, description = "the blob's CRC-32, 8 lower-case hex digits, quoted"),
+                ("Cache-Control" = String, description = "`public, max-age=31536000, immutable`"),
+                ("Accept-Ranges" = String, description = "`bytes`"),
+            )),
+        (status = 206, description = "A range of the blob (Content-Range)",
+            body = super::openapi::Binary, content_type = "application/octet-stream",
+            headers(("Content-Range" = String, description = "bytes a-b/length"))),
+        (status = 304, description = "Not modified (If-None-Match)",
+            headers(("ETag" = String, description = "the blob's tag"))),
+        (status = 409, description = "The model is not ready (pending, building or failed)",
+            body = super::openapi::ErrorBody),
+        (status = 416, description = "Bad range: it starts beyond the end (Content-Range: bytes */length)",
+            body = super::openapi::ErrorBody,
+            headers(("Content-Range" = String, description = "bytes */length"))),
+    ),
+    security(("sessionCookie" = ["viewer"])))]
 async fn patch(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -406,6 +542,39 @@ async fn patch(
     Ok(serve_bytes(&req, open, start, end, &etag, IMMUTABLE))
 }
 
+/// The whole .mwlod file
+///
+/// The file as built, with one byte range per request (neighbouring patches are contiguous
+/// in locality order, so one range fetches several); `ETag` (the header's CRC and the file
+/// length), `If-None-Match` (304), `If-Range`; `Cache-Control: private, no-cache`;
+/// `Content-Encoding: identity`, so ranges count stored bytes.
+#[utoipa::path(get, path = "/api/v1/models/{id}/lod/file", tag = "lod",
+    params(
+        ("id" = i64, Path, description = "model id"),
+        ("Range" = Option<String>, Header, description = "bytes=a-b, bytes=a- or bytes=-n"),
+        ("If-Range" = Option<String>, Header, description = "serve the range only while the ETag is this one"),
+        ("If-None-Match" = Option<String>, Header, description = "an ETag seen before, or `*`"),
+    ),
+    responses(
+        (status = 200, description = "The file", body = super::openapi::Binary,
+            content_type = "application/octet-stream",
+            headers(
+                ("ETag" = String, description = "strong tag: `\"<crc>-<len hex>\"`"),
+                ("Cache-Control" = String, description = "`private, no-cache`"),
+                ("Accept-Ranges" = String, description = "`bytes`"),
+            )),
+        (status = 206, description = "A range of the file (Content-Range)",
+            body = super::openapi::Binary, content_type = "application/octet-stream",
+            headers(("Content-Range" = String, description = "bytes a-b/length"))),
+        (status = 304, description = "Not modified (If-None-Match)",
+            headers(("ETag" = String, description = "the file's tag"))),
+        (status = 409, description = "The model is not ready (pending, building or failed)",
+            body = super::openapi::ErrorBody),
+        (status = 416, description = "Bad range: it starts beyond the end (Content-Range: bytes */length)",
+            body = super::openapi::ErrorBody,
+            headers(("Content-Range" = String, description = "bytes */length"))),
+    ),
+    security(("sessionCookie" = ["viewer"])))]
 async fn file(
     state: web::Data<AppState>,
     _auth: Auth,

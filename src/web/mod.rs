@@ -4,6 +4,7 @@
 pub mod assignments;
 pub mod attachments;
 pub mod auth;
+pub mod client;
 pub mod contents;
 pub mod error;
 pub mod events;
@@ -39,7 +40,8 @@ pub type AppState = crate::app::App;
 pub use crate::app::StartError;
 
 /// `limit` / `offset` query parameters of list routes.
-#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct PageQuery {
     /// Rows to return (1–1000, default 100).
     pub limit: Option<i64>,
@@ -54,11 +56,28 @@ impl PageQuery {
     }
 }
 
-/// A resource whose unknown methods answer 405 JSON.
+/// A resource whose unknown methods answer 405 JSON. Every route of the app is mounted
+/// through here, which records its path ([`mounted_paths`]).
 pub fn resource(path: &str) -> actix_web::Resource {
+    if let Ok(mut paths) = MOUNTED.lock() {
+        paths.insert(path.to_string());
+    }
     web::resource(path).default_service(web::to(|| async {
         Err::<actix_web::HttpResponse, _>(ApiError::MethodNotAllowed)
     }))
+}
+
+static MOUNTED: std::sync::Mutex<std::collections::BTreeSet<String>> =
+    std::sync::Mutex::new(std::collections::BTreeSet::new());
+
+/// The path of every resource mounted so far by [`configure`] in this process (for the test
+/// that the OpenAPI document covers the running app; a resource answers 405 to a method it
+/// does not mount).
+pub fn mounted_paths() -> Vec<String> {
+    MOUNTED
+        .lock()
+        .map(|p| p.iter().cloned().collect())
+        .unwrap_or_default()
 }
 
 /// Mounts every route.
@@ -76,6 +95,7 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     attachments::configure(cfg);
     search::configure(cfg);
     events::configure(cfg);
+    client::configure(cfg);
     openapi::configure(cfg);
     vendor::configure(cfg);
     static_files::configure(cfg);

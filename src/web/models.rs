@@ -8,7 +8,7 @@ use actix_web::{HttpResponse, web};
 use super::auth::Auth;
 use super::{ApiError, AppState, PageQuery};
 use crate::Settings;
-use crate::store::models::{self, ModelPatch, NewModel};
+use crate::store::models::{self, Model, ModelPatch, NewModel};
 use crate::store::users::Role;
 
 /// Mounts the routes.
@@ -26,6 +26,18 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     );
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(list, create, get, update, delete))]
+pub(super) struct Api;
+
+/// List models
+///
+/// Newest first.
+#[utoipa::path(get, path = "/api/v1/models", tag = "models",
+    params(super::PageQuery),
+    responses((status = 200, description = "Models, newest first", body = Vec<Model>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn list(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -34,6 +46,14 @@ async fn list(
     Ok(HttpResponse::Ok().json(models::list(&state.db, q.page()).await?))
 }
 
+/// Create an empty model record
+///
+/// The model starts with status `pending` and no geometry; scans are uploaded with
+/// `POST /api/v1/models/upload`, which creates the model and its build job together.
+#[utoipa::path(post, path = "/api/v1/models", tag = "models",
+    request_body = NewModel,
+    responses((status = 201, description = "Created", body = Model)),
+    security(("sessionCookie" = ["admin"])))]
 async fn create(
     state: web::Data<AppState>,
     auth: Auth,
@@ -44,6 +64,11 @@ async fn create(
     Ok(HttpResponse::Created().json(model))
 }
 
+/// Get a model.
+#[utoipa::path(get, path = "/api/v1/models/{id}", tag = "models",
+    params(("id" = i64, Path, description = "model id")),
+    responses((status = 200, description = "The model", body = Model)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -52,6 +77,14 @@ async fn get(
     Ok(HttpResponse::Ok().json(models::get(&state.db, *id).await?))
 }
 
+/// Change a model's title, description or thumbnail
+///
+/// A new title re-indexes, for search, every content assigned to the model's parts.
+#[utoipa::path(patch, path = "/api/v1/models/{id}", tag = "models",
+    params(("id" = i64, Path, description = "model id")),
+    request_body = ModelPatch,
+    responses((status = 200, description = "Updated", body = Model)),
+    security(("sessionCookie" = ["editor"])))]
 async fn update(
     state: web::Data<AppState>,
     auth: Auth,
@@ -64,6 +97,14 @@ async fn update(
     Ok(HttpResponse::Ok().json(model))
 }
 
+/// Delete a model
+///
+/// Its parts and their assignments go with it (contents stay), a build still running for it
+/// stops, and its LOD file is removed.
+#[utoipa::path(delete, path = "/api/v1/models/{id}", tag = "models",
+    params(("id" = i64, Path, description = "model id")),
+    responses((status = 204, description = "Deleted")),
+    security(("sessionCookie" = ["admin"])))]
 async fn delete(
     state: web::Data<AppState>,
     auth: Auth,

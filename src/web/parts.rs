@@ -6,7 +6,7 @@ use actix_web::{HttpResponse, http::header, web};
 use super::auth::Auth;
 use super::{ApiError, AppState};
 use crate::store::models;
-use crate::store::parts::{self, NewPart, PartPatch};
+use crate::store::parts::{self, NewPart, Part, PartPatch};
 use crate::store::users::Role;
 
 /// Mounts the routes.
@@ -25,6 +25,16 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     .service(super::resource("/api/v1/parts/{id}/vertices").route(web::get().to(vertices)));
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(list, create, get, update, delete, vertices))]
+pub(super) struct Api;
+
+/// List a model's parts.
+#[utoipa::path(get, path = "/api/v1/models/{id}/parts", tag = "parts",
+    params(("id" = i64, Path, description = "model id")),
+    responses((status = 200, description = "The model's parts", body = Vec<Part>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn list(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -34,6 +44,15 @@ async fn list(
     Ok(HttpResponse::Ok().json(parts::list_for_model(&state.db, *model_id).await?))
 }
 
+/// Create a part
+///
+/// Points need only a centre; regions also their original vertex ids. The creation is the
+/// part's first revision, with the author and the optional comment.
+#[utoipa::path(post, path = "/api/v1/models/{id}/parts", tag = "parts",
+    params(("id" = i64, Path, description = "model id")),
+    request_body = NewPart,
+    responses((status = 201, description = "Created", body = Part)),
+    security(("sessionCookie" = ["editor"])))]
 async fn create(
     state: web::Data<AppState>,
     auth: Auth,
@@ -45,6 +64,11 @@ async fn create(
     Ok(HttpResponse::Created().json(part))
 }
 
+/// Get a part.
+#[utoipa::path(get, path = "/api/v1/parts/{id}", tag = "parts",
+    params(("id" = i64, Path, description = "part id")),
+    responses((status = 200, description = "The part", body = Part)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -53,6 +77,15 @@ async fn get(
     Ok(HttpResponse::Ok().json(parts::get(&state.db, *id).await?))
 }
 
+/// Change a part
+///
+/// Every change is a revision in the part's history (`/api/v1/parts/{id}/revisions`), with
+/// the author and the optional comment.
+#[utoipa::path(patch, path = "/api/v1/parts/{id}", tag = "parts",
+    params(("id" = i64, Path, description = "part id")),
+    request_body = PartPatch,
+    responses((status = 200, description = "Updated", body = Part)),
+    security(("sessionCookie" = ["editor"])))]
 async fn update(
     state: web::Data<AppState>,
     auth: Auth,
@@ -64,6 +97,13 @@ async fn update(
     Ok(HttpResponse::Ok().json(part))
 }
 
+/// Delete a part
+///
+/// Its assignments go; its contents stay, and its history keeps a `delete` revision.
+#[utoipa::path(delete, path = "/api/v1/parts/{id}", tag = "parts",
+    params(("id" = i64, Path, description = "part id")),
+    responses((status = 204, description = "Deleted")),
+    security(("sessionCookie" = ["editor"])))]
 async fn delete(
     state: web::Data<AppState>,
     auth: Auth,
@@ -74,7 +114,14 @@ async fn delete(
     Ok(HttpResponse::NoContent().finish())
 }
 
-/// The part's vertex set as a serialised `RoaringBitmap` (portable format).
+/// The part's vertex set
+///
+/// A serialised `RoaringBitmap` (portable format) of original vertex ids.
+#[utoipa::path(get, path = "/api/v1/parts/{id}/vertices", tag = "parts",
+    params(("id" = i64, Path, description = "part id")),
+    responses((status = 200, description = "The vertex set", body = super::openapi::Binary,
+        content_type = "application/octet-stream")),
+    security(("sessionCookie" = ["viewer"])))]
 async fn vertices(
     state: web::Data<AppState>,
     _auth: Auth,

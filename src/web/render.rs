@@ -45,15 +45,18 @@ use meshwiki_engine::render::callouts::{self, CalloutPart, CalloutStyle, LayoutO
 use meshwiki_engine::render::encode::{self, ImageFormat};
 use meshwiki_engine::render::highlight::TINTS;
 use meshwiki_engine::render::{
-    Cut, Frame, Highlight, Model, Outputs, RenderOptions, RenderStats, Renderer,
+    Cut, Frame, Highlight, Outputs, RenderModel, RenderOptions, RenderStats, Renderer,
 };
 use roaring::RoaringBitmap;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
+use utoipa::openapi::path::{Parameter, ParameterIn};
+use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Auth;
 use super::{ApiError, AppState};
 use crate::app::models::Purpose;
+use crate::app::selections::ViewCamera;
 use crate::config::RenderSettings;
 use crate::render::{MemoryHold, PoolError, RenderService, RenderServiceError};
 use crate::store::{assignments, parts};
@@ -81,6 +84,11 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
         );
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(image, buffers, callouts_json))]
+pub(super) struct Api;
+
 impl From<RenderServiceError> for ApiError {
     fn from(e: RenderServiceError) -> ApiError {
         match e {
@@ -107,23 +115,93 @@ impl From<RenderServiceError> for ApiError {
     }
 }
 
-/// Query parameters (strings, parsed by [`Params::parse`] for precise messages).
-#[derive(Debug, Default, Deserialize)]
+/// Query parameters (strings, parsed by [`Params::parse`] for precise messages). In the
+/// OpenAPI document each route lists the ones it takes ([`ImageQuery`], [`BuffersQuery`],
+/// [`CalloutsQuery`]); the others answer 400 there.
+#[derive(Debug, Default, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 #[serde(deny_unknown_fields)]
 pub struct RenderQuery {
+    /// Camera position x,y,z (default: the model's overview camera).
     eye: Option<String>,
+    /// Point looked at x,y,z (default: the model's centre; needs `eye`; not the eye itself).
     target: Option<String>,
+    /// Up vector x,y,z, not zero (default: +Y, or +Z when looking along Y, with `eye`; the
+    /// overview camera's up without).
     up: Option<String>,
+    /// Vertical field of view in degrees, 1-170 (default 45).
+    #[param(value_type = Option<f32>, minimum = 1, maximum = 170)]
     fovy: Option<String>,
+    /// Image width, 1 to `MESHWIKI_RENDER_MAX_SIDE` (default 640); `w`×`h` at most
+    /// `MESHWIKI_RENDER_MAX_PIXELS`.
+    #[param(value_type = Option<u32>, minimum = 1)]
     w: Option<String>,
+    /// Image height, 1 to `MESHWIKI_RENDER_MAX_SIDE` (default 480).
+    #[param(value_type = Option<u32>, minimum = 1)]
     h: Option<String>,
+    /// Comma-separated part ids of this model to tint, in order (at most 64).
     parts: Option<String>,
+    /// A part id of this model to outline (the hovered part).
+    #[param(value_type = Option<i64>, minimum = 1)]
     hover: Option<String>,
+    /// Pixel error of the view-dependent cut, 0.25-64 (default 1).
+    #[param(value_type = Option<f32>, minimum = 0.25, maximum = 64)]
     px: Option<String>,
+    /// Image format: `png` (default), `jpeg` (or `jpg`) or `webp` (lossless).
     format: Option<String>,
+    /// JPEG quality 1-100 (default 90).
+    #[param(value_type = Option<u8>, minimum = 1, maximum = 100)]
     quality: Option<String>,
+    /// `1` or `true`: draw labels (the first assigned content's title) with leader lines for
+    /// the parts named in `parts`/`hover`, or for every part of the model when none is named;
+    /// `0` or `false` (default): none.
     callouts: Option<String>,
+    /// Comma-separated subset of `color`, `normal`, `depth`, `ids` (default
+    /// `normal,depth,ids`).
     buffers: Option<String>,
+}
+
+/// The parameters of [`RenderQuery`] that `route` takes (the OpenAPI parameters of its
+/// operation).
+fn route_params(route: Route, provider: impl Fn() -> Option<ParameterIn>) -> Vec<Parameter> {
+    RenderQuery::into_params(provider)
+        .into_iter()
+        .filter(|p| match p.name.as_str() {
+            "format" | "quality" | "callouts" => route == Route::Image,
+            "buffers" => route == Route::Buffers,
+            _ => true,
+        })
+        .collect()
+}
+
+/// The query of `GET /api/v1/models/{id}/render` in the OpenAPI document: [`RenderQuery`]
+/// without `buffers`.
+pub struct ImageQuery;
+
+impl IntoParams for ImageQuery {
+    fn into_params(provider: impl Fn() -> Option<ParameterIn>) -> Vec<Parameter> {
+        route_params(Route::Image, provider)
+    }
+}
+
+/// The query of `GET /api/v1/models/{id}/render/buffers` in the OpenAPI document:
+/// [`RenderQuery`] without `format`, `quality` and `callouts`.
+pub struct BuffersQuery;
+
+impl IntoParams for BuffersQuery {
+    fn into_params(provider: impl Fn() -> Option<ParameterIn>) -> Vec<Parameter> {
+        route_params(Route::Buffers, provider)
+    }
+}
+
+/// The query of `GET /api/v1/models/{id}/render/callouts` in the OpenAPI document:
+/// [`RenderQuery`] without `format`, `quality`, `callouts` and `buffers`.
+pub struct CalloutsQuery;
+
+impl IntoParams for CalloutsQuery {
+    fn into_params(provider: impl Fn() -> Option<ParameterIn>) -> Vec<Parameter> {
+        route_params(Route::Callouts, provider)
+    }
 }
 
 /// Which route parses.
@@ -330,7 +408,7 @@ impl Params {
     }
 
     /// The camera on `model` (defaults as in the module documentation).
-    fn camera(&self, model: &Model) -> Result<Camera, ApiError> {
+    fn camera(&self, model: &RenderModel) -> Result<Camera, ApiError> {
         let (w, h) = (self.width, self.height);
         let cam = match self.eye {
             None => {
@@ -379,9 +457,31 @@ impl Params {
     }
 }
 
-fn camera_json(c: &Camera) -> serde_json::Value {
-    json!({"eye": c.eye.to_array(), "target": c.target.to_array(), "up": c.up.to_array(),
-           "fovy": c.fovy_deg, "width": c.width, "height": c.height})
+/// The callout layout of a view (`GET /api/v1/models/{id}/render/callouts`), for the browser
+/// to draw as HTML.
+#[derive(Debug, Serialize, ToSchema)]
+#[schema(as = CalloutLayout)]
+pub struct CalloutsJson {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// The camera used.
+    pub camera: ViewCamera,
+    /// Font pixel size of the labels (1 = 5×7 glyphs; 1 below 400 pixels of height).
+    pub font_scale: u32,
+    /// Placed callouts, in priority order.
+    pub callouts: Vec<callouts::Callout>,
+    /// Parts that got no callout, with the reason.
+    pub hidden: Vec<callouts::HiddenCallout>,
+    /// Smallest gap in pixels between labels and from the image border.
+    pub margin: u32,
+    /// The input of the label placement: every part whose anchor is visible (in view, not
+    /// occluded), in priority order, with its anchor and label size; the placed `callouts`
+    /// and the `no_room` entries of `hidden` are these parts. With `margin` and the depth
+    /// buffer of the same view (`render/buffers`), the browser's placement
+    /// (`static/js/parts/place.js`) gives the same layout.
+    pub labels: Vec<callouts::CalloutLabel>,
 }
 
 /// Checks that every named part is on the model; returns the bytes of their vertex sets.
@@ -418,7 +518,7 @@ async fn callout_parts(
     state: &AppState,
     model_id: i64,
     named: &[i64],
-    model: &Model,
+    model: &RenderModel,
 ) -> Result<Vec<CalloutPart>, ApiError> {
     let all = parts::list_for_model(&state.db, model_id).await?;
     let chosen: Vec<&parts::Part> = if named.is_empty() {
@@ -470,7 +570,7 @@ fn highlights<'a>(
 /// Draws the view-dependent cut of `params` for `camera`, with the highlights of `sets`.
 fn render_view(
     r: &Renderer,
-    model: &Model,
+    model: &RenderModel,
     camera: &Camera,
     params: &Params,
     sets: &[(i64, RoaringBitmap)],
@@ -521,7 +621,7 @@ fn held(data: Vec<u8>, hold: MemoryHold) -> HeldBody {
 struct Prepared {
     service: RenderService,
     params: Params,
-    model: Model,
+    model: RenderModel,
     camera: Camera,
     set_bytes: u64,
 }
@@ -557,6 +657,33 @@ fn stats_headers(resp: &mut actix_web::HttpResponseBuilder, stats: &RenderStats)
         .insert_header(("X-Render-Ms", format!("{:.1}", stats.total_ms)));
 }
 
+/// Render the model
+///
+/// The model's hierarchy drawn from a camera (view-dependent cut of `px` pixels): the parts
+/// in `parts` tinted in order, the `hover` part outlined, callouts drawn on request. Runs on
+/// a bounded worker pool (`MESHWIKI_RENDER_WORKERS`, `MESHWIKI_RENDER_QUEUE`); every
+/// parameter is checked (400 with a message), as is every named part (on this model).
+#[utoipa::path(get, path = "/api/v1/models/{id}/render", tag = "render",
+    params(("id" = i64, Path, description = "model id"), ImageQuery),
+    responses(
+        (status = 200, description = "The image (`Content-Encoding: identity`)",
+            content(
+                (super::openapi::Binary = "image/png"),
+                (super::openapi::Binary = "image/jpeg"),
+                (super::openapi::Binary = "image/webp"),
+            ),
+            headers(
+                ("X-Render-Triangles" = u64, description = "triangles drawn"),
+                ("X-Render-Patches" = u64, description = "patches drawn"),
+                ("X-Render-Ms" = f64, description = "render time in milliseconds"),
+            )),
+        (status = 409, description = "The model is not ready (pending, building or failed)",
+            body = super::openapi::ErrorBody),
+        (status = 503, description = "Render queue full or out of render memory (with Retry-After, seconds), or no GPU adapter on the server",
+            body = super::openapi::ErrorBody,
+            headers(("Retry-After" = u32, description = "seconds; absent when rendering is unavailable"))),
+    ),
+    security(("sessionCookie" = ["viewer"])))]
 async fn image(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -617,6 +744,33 @@ async fn image(
     Ok(resp.body(held(data, hold)))
 }
 
+/// Per-pixel buffers for tools
+///
+/// Body (little endian): `MWRB`, u32 version 1, u32 `J`, `J` bytes of JSON header (UTF-8,
+/// padded with spaces to a multiple of 4: width, height, camera, pixel_error, parts, hover,
+/// background, stats, buffers: `[{name, type, components, offset, bytes}]`), then the arrays
+/// at their offsets, row-major, top row first: `color` u8×4, `normal` f32×3 (0 on the
+/// background), `depth` f32 (linear view depth, +inf on the background), `node` u32,
+/// `vertex` u32 (original vertex id of the model), `triangle` u32 (index in its patch),
+/// `highlight` u32 (bits 0-7: 1-based index in `parts`, bit 8: hover, bit 31: covered); ids
+/// are 0xFFFFFFFF on the background.
+#[utoipa::path(get, path = "/api/v1/models/{id}/render/buffers", tag = "render",
+    params(("id" = i64, Path, description = "model id"), BuffersQuery),
+    responses(
+        (status = 200, description = "The buffers (`Content-Encoding: identity`)",
+            body = super::openapi::Binary, content_type = "application/octet-stream",
+            headers(
+                ("X-Render-Triangles" = u64, description = "triangles drawn"),
+                ("X-Render-Patches" = u64, description = "patches drawn"),
+                ("X-Render-Ms" = f64, description = "render time in milliseconds"),
+            )),
+        (status = 409, description = "The model is not ready (pending, building or failed)",
+            body = super::openapi::ErrorBody),
+        (status = 503, description = "Render queue full or out of render memory (with Retry-After, seconds), or no GPU adapter on the server",
+            body = super::openapi::ErrorBody,
+            headers(("Retry-After" = u32, description = "seconds; absent when rendering is unavailable"))),
+    ),
+    security(("sessionCookie" = ["viewer"])))]
 async fn buffers(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -686,7 +840,7 @@ fn buffers_body(
             "version": BUFFERS_VERSION,
             "width": frame.width,
             "height": frame.height,
-            "camera": camera_json(camera),
+            "camera": ViewCamera::of(camera),
             "pixel_error": params.px,
             "parts": params.parts,
             "hover": params.hover,
@@ -750,6 +904,24 @@ fn bytemuck_bytes_u8(px: &[[u8; 4]]) -> &[u8] {
     px.as_flattened()
 }
 
+/// The callout layout of a view
+///
+/// For the browser to draw as HTML: each visible part's anchor (its centre) projected,
+/// labels (the first assigned content's title, else `Part <id>`) placed without overlap,
+/// leader lines; the parts named in `parts`/`hover`, or every part of the model (at most 64)
+/// when none is named. Parts hidden (behind, outside, occluded, no room) are listed with the
+/// reason.
+#[utoipa::path(get, path = "/api/v1/models/{id}/render/callouts", tag = "render",
+    params(("id" = i64, Path, description = "model id"), CalloutsQuery),
+    responses(
+        (status = 200, description = "The layout", body = CalloutsJson),
+        (status = 409, description = "The model is not ready (pending, building or failed)",
+            body = super::openapi::ErrorBody),
+        (status = 503, description = "Render queue full or out of render memory (with Retry-After, seconds), or no GPU adapter on the server",
+            body = super::openapi::ErrorBody,
+            headers(("Retry-After" = u32, description = "seconds; absent when rendering is unavailable"))),
+    ),
+    security(("sessionCookie" = ["viewer"])))]
 async fn callouts_json(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -773,18 +945,20 @@ async fn callouts_json(
             let opts = LayoutOptions::for_height(camera.height);
             let layout = callouts::layout(&labels, &camera, frame.depth.as_deref(), &opts)
                 .map_err(|e| RenderServiceError::Invalid(e.to_string()))?;
-            Ok((layout, opts.font_scale))
+            Ok((layout, opts))
         })
         .await?;
-    let (layout, font_scale) = result?;
-    Ok(HttpResponse::Ok().json(json!({
-        "width": layout.width,
-        "height": layout.height,
-        "camera": camera_json(&camera),
-        "font_scale": font_scale,
-        "callouts": layout.callouts,
-        "hidden": layout.hidden,
-    })))
+    let (layout, opts) = result?;
+    Ok(HttpResponse::Ok().json(CalloutsJson {
+        width: layout.width,
+        height: layout.height,
+        camera: ViewCamera::of(&camera),
+        font_scale: opts.font_scale,
+        callouts: layout.callouts,
+        hidden: layout.hidden,
+        margin: opts.margin,
+        labels: layout.labels,
+    }))
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 
 use actix_web::{HttpResponse, web};
 use serde::Deserialize;
+use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Auth;
 use super::{ApiError, AppState};
@@ -14,10 +15,17 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     cfg.service(super::resource("/api/v1/search").route(web::get().to(search)));
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(search))]
+pub(super) struct Api;
+
 /// Search parameters.
-#[derive(Debug, Default, Deserialize)]
+#[derive(Debug, Default, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct SearchQuery {
-    /// Query text (words are ANDed; tantivy syntax such as `"phrase"` and `-word` works).
+    /// Query text (words are ANDed; tantivy syntax such as `"phrase"` and `-word` works; at
+    /// most 1000 bytes). Empty: no hits.
     #[serde(default)]
     pub q: String,
     /// Only contents assigned to this model (empty: all).
@@ -25,7 +33,7 @@ pub struct SearchQuery {
     pub model: Option<i64>,
     /// Hits per page (1–100, default 20).
     pub limit: Option<usize>,
-    /// Hits to skip.
+    /// Hits to skip (at most 10000).
     pub offset: Option<usize>,
 }
 
@@ -48,6 +56,18 @@ pub async fn run(state: &AppState, q: &SearchQuery) -> Result<SearchResults, Api
     )
 }
 
+/// Full-text search over contents
+///
+/// Searches the title, caption, body, attachment names and the titles of the models a content
+/// is assigned to (title and caption weigh more). Hits come best first, each with highlighted
+/// snippets and the parts it is assigned to (links to their best views); the total number of
+/// matches is in the `X-Total-Count` header.
+#[utoipa::path(get, path = "/api/v1/search", tag = "search",
+    params(SearchQuery),
+    responses((status = 200, description = "Hits, best first", body = Vec<HitView>,
+        headers(("X-Total-Count" = usize,
+            description = "Number of matching contents, all pages together")))),
+    security(("sessionCookie" = ["viewer"])))]
 async fn search(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -62,7 +82,7 @@ async fn search(
 
 /// A part a hit is assigned to, with the link that opens the viewer on the part's best view
 /// (framed, highlighted, its information open).
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize, ToSchema)]
 pub struct PartLink {
     /// Part id.
     pub id: i64,
@@ -72,13 +92,15 @@ pub struct PartLink {
     pub model_title: String,
     /// Part kind.
     pub kind: String,
-    /// `/models/{model_id}?part={id}`.
+    /// `/models/{model_id}?part={id}`: the page opening the viewer on the part's best view
+    /// (framed, highlighted, its information open).
     pub url: String,
     /// The part's thumbnail (an attachment), once rendered.
     pub thumbnail_attachment_id: Option<i64>,
     /// The part's best view (or the camera a client gave it).
     pub camera: Option<crate::store::parts::Camera>,
-    /// A server-rendered image of that view with the part tinted (for clients without 3D).
+    /// A server-rendered image of that view with the part tinted (for clients without 3D):
+    /// `GET /api/v1/models/{model_id}/render` at 640×480.
     pub image_url: Option<String>,
 }
 
@@ -95,7 +117,7 @@ pub fn view_image_url(model_id: i64, part: i64, camera: &crate::store::parts::Ca
 }
 
 /// A search hit with the parts it is assigned to.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize, ToSchema)]
 pub struct HitView {
     /// The hit.
     #[serde(flatten)]

@@ -40,12 +40,15 @@ use actix_multipart::Multipart;
 use actix_web::http::header;
 use actix_web::{HttpRequest, HttpResponse, web};
 use futures_util::StreamExt;
+use utoipa::ToSchema;
 
 use super::auth::Auth;
 use super::{ApiError, AppState};
-use crate::app::selections::{ConfirmRequest, MAX_MASK_BYTES, MAX_REQUEST_BYTES, SelectionRequest};
-use crate::store::part_revisions;
-use crate::store::parts;
+use crate::app::selections::{
+    ConfirmRequest, MAX_MASK_BYTES, MAX_REQUEST_BYTES, SelectionDraft, SelectionRequest,
+};
+use crate::store::part_revisions::{self, PartRevision};
+use crate::store::parts::{self, Part};
 use crate::store::users::Role;
 
 /// Mounts the routes.
@@ -68,6 +71,33 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
             super::resource("/api/v1/parts/{id}/revisions/{number}/vertices")
                 .route(web::get().to(revision_vertices)),
         );
+}
+
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(
+    create,
+    get,
+    discard,
+    mask_png,
+    vertices,
+    confirm,
+    revisions,
+    revision_vertices
+))]
+pub(super) struct Api;
+
+/// The multipart form of `POST /api/v1/models/{id}/selections` (it documents what
+/// `read_body` reads; fields in any order, each at most once).
+#[derive(ToSchema)]
+pub struct SelectionForm {
+    /// The selection request (JSON, at most 64 KiB).
+    pub request: SelectionRequest,
+    /// The stroke mask (at most 32 MiB): a PNG of the camera's size whose grey levels are
+    /// labels: 0 none, 1 foreground, 2 background, 3 heavy band, 4 lasso inside. Every tool
+    /// but `point` needs it.
+    #[schema(value_type = Option<String>, format = Binary)]
+    pub mask: Option<Vec<u8>>,
 }
 
 /// Reads the body: a multipart form (`request` + `mask`) or, for the point tool, JSON.
@@ -157,6 +187,45 @@ async fn read_body(
 
 // ---- handlers -------------------------------------------------------------------------------
 
+/// Make a draft selection
+///
+/// Strokes (or a click) on one view in, a draft of exact full-resolution vertices out. The
+/// body is a `multipart/form-data` form with a `request` field (JSON) and a `mask` field
+/// (the stroke mask PNG, `image/png` or `application/octet-stream`); the point tool needs no
+/// mask, so its request may also be sent as the whole `application/json` body. The server
+/// renders the view's colour, normal, depth and id buffers on the render pool (the same
+/// admission, worker and memory limits as every render), cuts, back-projects the selected
+/// pixels to original vertex ids (occluded surfaces are never selected), combines them with
+/// the base (`part_id` or a previous draft `base`) in `mode`, and keeps the result for 30
+/// minutes as the user's draft. Drafts belong to their user: anyone else gets 404. Bad input
+/// is a 400 with a message: a mask that is not a label image or of the wrong size, empty
+/// strokes, a heavy lasso that encloses nothing, a camera that sees nothing or is invalid, a
+/// view beyond the render limits, an unknown form field.
+#[utoipa::path(post, path = "/api/v1/models/{id}/selections", tag = "selections",
+    params(("id" = i64, Path, description = "model id")),
+    request_body(
+        description = "A multipart form (`request` + `mask`), or for the point tool the request as JSON",
+        content(
+            (inline(SelectionForm) = "multipart/form-data",
+                encoding(
+                    ("request" = (content_type = "application/json")),
+                    ("mask" = (content_type = "image/png, application/octet-stream")),
+                )),
+            (SelectionRequest = "application/json"),
+        )),
+    responses(
+        (status = 201, description = "The draft", body = SelectionDraft),
+        (status = 409, description = "The model is not ready (pending, building or failed)",
+            body = super::openapi::ErrorBody),
+        (status = 413, description = "The request field (64 KiB) or the mask (32 MiB) is too large",
+            body = super::openapi::ErrorBody),
+        (status = 415, description = "Neither multipart/form-data nor application/json, or a mask that is not a PNG",
+            body = super::openapi::ErrorBody),
+        (status = 503, description = "Render queue full or out of render memory (with Retry-After, seconds), or no GPU adapter on the server",
+            body = super::openapi::ErrorBody,
+            headers(("Retry-After" = u32, description = "seconds; absent when rendering is unavailable"))),
+    ),
+    security(("sessionCookie" = ["editor"])))]
 async fn create(
     state: web::Data<AppState>,
     auth: Auth,
@@ -170,6 +239,13 @@ async fn create(
     Ok(HttpResponse::Created().json(draft.json(true)))
 }
 
+/// Get a draft selection
+///
+/// The user's own draft (anyone else's is 404), with the selected pixels as a data URL.
+#[utoipa::path(get, path = "/api/v1/selections/{draft}", tag = "selections",
+    params(("draft" = String, Path, description = "draft id")),
+    responses((status = 200, description = "The draft", body = SelectionDraft)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
     auth: Auth,
@@ -179,6 +255,13 @@ async fn get(
     Ok(HttpResponse::Ok().json(d.json(true)))
 }
 
+/// Discard a draft selection
+///
+/// The user's own draft (anyone else's is 404).
+#[utoipa::path(delete, path = "/api/v1/selections/{draft}", tag = "selections",
+    params(("draft" = String, Path, description = "draft id")),
+    responses((status = 204, description = "Discarded")),
+    security(("sessionCookie" = ["viewer"])))]
 async fn discard(
     state: web::Data<AppState>,
     auth: Auth,
@@ -189,6 +272,14 @@ async fn discard(
     Ok(HttpResponse::NoContent().finish())
 }
 
+/// The draft's selected pixels
+///
+/// A PNG of the view's size, alpha 255 where selected.
+#[utoipa::path(get, path = "/api/v1/selections/{draft}/mask", tag = "selections",
+    params(("draft" = String, Path, description = "draft id")),
+    responses((status = 200, description = "The mask", body = super::openapi::Binary,
+        content_type = "image/png")),
+    security(("sessionCookie" = ["viewer"])))]
 async fn mask_png(
     state: web::Data<AppState>,
     auth: Auth,
@@ -200,6 +291,14 @@ async fn mask_png(
         .body(d.mask_png.clone()))
 }
 
+/// The draft's vertex set
+///
+/// A serialised `RoaringBitmap` (portable format) of original vertex ids.
+#[utoipa::path(get, path = "/api/v1/selections/{draft}/vertices", tag = "selections",
+    params(("draft" = String, Path, description = "draft id")),
+    responses((status = 200, description = "The vertex set", body = super::openapi::Binary,
+        content_type = "application/octet-stream")),
+    security(("sessionCookie" = ["viewer"])))]
 async fn vertices(
     state: web::Data<AppState>,
     auth: Auth,
@@ -211,6 +310,21 @@ async fn vertices(
         .body(parts::serialize_vertex_set(&d.set.vertices)))
 }
 
+/// Confirm a draft selection
+///
+/// Creates a part from the draft (201), or updates the part it edits (200) as a revision
+/// with the tool and the view; the draft is then gone. The body is optional (empty: the
+/// defaults). The part gets its best view and thumbnail from the render service.
+#[utoipa::path(post, path = "/api/v1/selections/{draft}/confirm", tag = "selections",
+    params(("draft" = String, Path, description = "draft id")),
+    request_body = Option<ConfirmRequest>,
+    responses(
+        (status = 201, description = "A part created", body = Part),
+        (status = 200, description = "The edited part updated", body = Part),
+        (status = 409, description = "The edited part changed since the draft was made",
+            body = super::openapi::ErrorBody),
+    ),
+    security(("sessionCookie" = ["editor"])))]
 async fn confirm(
     state: web::Data<AppState>,
     auth: Auth,
@@ -233,6 +347,16 @@ async fn confirm(
     Ok(HttpResponse::build(status).json(part))
 }
 
+/// A part's history
+///
+/// Every revision of the part, oldest first: created, edited through `/api/v1/parts` or a
+/// selection, deleted; with its state then (kind, centre, vertex count, camera), author,
+/// time, comment, and the selection tool and view when a selection made it. A part made
+/// before revisions were kept has none.
+#[utoipa::path(get, path = "/api/v1/parts/{id}/revisions", tag = "parts",
+    params(("id" = i64, Path, description = "part id")),
+    responses((status = 200, description = "The revisions, oldest first", body = Vec<PartRevision>)),
+    security(("sessionCookie" = ["viewer"])))]
 async fn revisions(
     state: web::Data<AppState>,
     _auth: Auth,
@@ -246,6 +370,18 @@ async fn revisions(
     Ok(HttpResponse::Ok().json(list))
 }
 
+/// A part's vertex set at a revision
+///
+/// A serialised `RoaringBitmap` (portable format) of original vertex ids (empty when the
+/// revision had none).
+#[utoipa::path(get, path = "/api/v1/parts/{id}/revisions/{number}/vertices", tag = "parts",
+    params(
+        ("id" = i64, Path, description = "part id"),
+        ("number" = i64, Path, description = "revision number (1 = creation)"),
+    ),
+    responses((status = 200, description = "The vertex set", body = super::openapi::Binary,
+        content_type = "application/octet-stream")),
+    security(("sessionCookie" = ["viewer"])))]
 async fn revision_vertices(
     state: web::Data<AppState>,
     _auth: Auth,

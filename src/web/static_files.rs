@@ -45,6 +45,7 @@ pub const JS_MODULES: &[(&str, &str)] = js_modules![
     "parts/live.js",
     "parts/panel.js",
     "parts/parts.js",
+    "parts/place.js",
     "parts/roaring.js",
     "select/api.js",
     "select/assign.js",

@@ -2,10 +2,12 @@
 
 use actix_web::{HttpResponse, web};
 use serde::Deserialize;
+use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Auth;
 use super::{ApiError, AppState, PageQuery};
-use crate::store::users::{self, Role, UserPatch};
+use crate::store::audit::AuditEntry;
+use crate::store::users::{self, Role, User, UserPatch};
 use crate::store::{Page, audit};
 
 /// Mounts the routes.
@@ -24,18 +26,32 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     .service(super::resource("/api/v1/audit").route(web::get().to(audit_log)));
 }
 
+/// This module's operations in the OpenAPI document ([`super::openapi`]).
+#[derive(utoipa::OpenApi)]
+#[openapi(paths(list, create, get, update, disable, audit_log))]
+pub(super) struct Api;
+
 /// New account.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NewUser {
-    /// User name.
+    /// User name: 1–64 letters, digits, `.`, `_` or `-`.
+    #[schema(min_length = 1, max_length = 64)]
     pub username: String,
     /// Password (8–1024 characters).
+    #[schema(min_length = 8, max_length = 1024)]
     pub password: String,
     /// Role.
     pub role: Role,
 }
 
+/// List users
+///
+/// By user name.
+#[utoipa::path(get, path = "/api/v1/users", tag = "users",
+    params(PageQuery),
+    responses((status = 200, description = "Users, by name", body = Vec<User>)),
+    security(("sessionCookie" = ["admin"])))]
 async fn list(
     state: web::Data<AppState>,
     auth: Auth,
@@ -45,6 +61,13 @@ async fn list(
     Ok(HttpResponse::Ok().json(users::list(&state.db, q.page()).await?))
 }
 
+/// Create a user.
+#[utoipa::path(post, path = "/api/v1/users", tag = "users",
+    request_body = NewUser,
+    responses(
+        (status = 201, description = "Created", body = User),
+        (status = 409, description = "User name taken", body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["admin"])))]
 async fn create(
     state: web::Data<AppState>,
     auth: Auth,
@@ -62,6 +85,11 @@ async fn create(
     Ok(HttpResponse::Created().json(user))
 }
 
+/// Get a user.
+#[utoipa::path(get, path = "/api/v1/users/{id}", tag = "users",
+    params(("id" = i64, Path, description = "user id")),
+    responses((status = 200, description = "The user", body = User)),
+    security(("sessionCookie" = ["admin"])))]
 async fn get(
     state: web::Data<AppState>,
     auth: Auth,
@@ -83,6 +111,19 @@ pub fn guard_self(actor: i64, target: i64, patch: &UserPatch) -> Result<(), ApiE
     Ok(())
 }
 
+/// Change a user's role, password or disabled flag
+///
+/// Changing the password or disabling the account ends the user's sessions. Admins cannot
+/// disable or demote their own account.
+#[utoipa::path(patch, path = "/api/v1/users/{id}", tag = "users",
+    params(("id" = i64, Path, description = "user id")),
+    request_body = PatchBody,
+    responses(
+        (status = 200, description = "Updated", body = User),
+        (status = 409,
+            description = "Would lock out the acting admin (own account disabled or demoted)",
+            body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["admin"])))]
 async fn update(
     state: web::Data<AppState>,
     auth: Auth,
@@ -99,18 +140,31 @@ async fn update(
     Ok(HttpResponse::Ok().json(users::update(&state.db, *id, &patch, Some(auth.id())).await?))
 }
 
-/// Body of `PATCH /api/v1/users/{id}`.
-#[derive(Debug, Deserialize)]
+/// Body of `PATCH /api/v1/users/{id}`: changes to a user; an absent field stays as it is.
+#[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
+#[schema(as = UserPatch)]
 pub struct PatchBody {
     /// New role.
     pub role: Option<Role>,
-    /// New password.
+    /// New password (8–1024 characters; ends the user's sessions).
+    #[schema(min_length = 8, max_length = 1024)]
     pub password: Option<String>,
-    /// Disable / re-enable.
+    /// Disable (true; ends the user's sessions) or re-enable (false).
     pub disabled: Option<bool>,
 }
 
+/// Disable a user
+///
+/// Accounts are never erased: their revisions keep their author. Disabling ends the user's
+/// sessions; admins cannot disable their own account.
+#[utoipa::path(delete, path = "/api/v1/users/{id}", tag = "users",
+    params(("id" = i64, Path, description = "user id")),
+    responses(
+        (status = 200, description = "Disabled", body = User),
+        (status = 409, description = "Would lock out the acting admin (own account)",
+            body = super::openapi::ErrorBody)),
+    security(("sessionCookie" = ["admin"])))]
 async fn disable(
     state: web::Data<AppState>,
     auth: Auth,
@@ -125,13 +179,27 @@ async fn disable(
     Ok(HttpResponse::Ok().json(users::update(&state.db, *id, &patch, Some(auth.id())).await?))
 }
 
-#[derive(Debug, Deserialize)]
+/// Query of the audit log.
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 struct AuditQuery {
+    /// Entity kind, e.g. `content` (give `entity_id` too).
     entity: Option<String>,
+    /// Entity id (give `entity` too).
     entity_id: Option<i64>,
+    /// Rows to return (1–1000, default 100).
     limit: Option<i64>,
+    /// Rows to skip.
     offset: Option<i64>,
 }
+
+/// Audit log
+///
+/// Who changed what, when: newest first, optionally only the entries of one entity.
+#[utoipa::path(get, path = "/api/v1/audit", tag = "users",
+    params(AuditQuery),
+    responses((status = 200, description = "Entries, newest first", body = Vec<AuditEntry>)),
+    security(("sessionCookie" = ["admin"])))]
 
 async fn audit_log(
     state: web::Data<AppState>,

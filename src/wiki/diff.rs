@@ -4,7 +4,8 @@
 use similar::{ChangeTag, TextDiff};
 
 /// A rendered diff.
-#[derive(Debug, Clone, Default, serde::Serialize)]
+#[derive(Debug, Clone, Default, serde::Serialize, utoipa::ToSchema)]
+#[schema(as = TextDiff)]
 pub struct Diff {
     /// HTML table (`<table class="diff">`), escaped and safe to embed.
     pub html: String,

@@ -11,6 +11,7 @@ mod import;
 mod jobs;
 mod layers;
 mod lod;
+mod openapi;
 mod pages;
 mod render;
 mod security;

@@ -719,77 +719,8 @@ fn security_headers_and_openapi() {
     assert!(cookie.contains("SameSite=Lax"), "{cookie}");
     assert!(cookie.contains("Path=/"), "{cookie}");
 
-    // OpenAPI: public, parses, lists every route with its methods.
+    // OpenAPI: public (its coverage of the mounted routes is tests/server/openapi.rs).
     let doc = s.server.client().get("/api/v1/openapi.json");
     assert_eq!(doc.status, 200);
-    let doc = doc.json();
-    assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
-    let paths = doc["paths"].as_object().unwrap();
-    let expected: &[(&str, &[&str])] = &[
-        ("/api/v1/session", &["get", "post", "delete"]),
-        ("/api/v1/users", &["get", "post"]),
-        ("/api/v1/users/{id}", &["get", "patch", "delete"]),
-        ("/api/v1/audit", &["get"]),
-        ("/api/v1/models", &["get", "post"]),
-        ("/api/v1/models/{id}", &["get", "patch", "delete"]),
-        ("/api/v1/models/upload", &["post"]),
-        ("/api/v1/models/{id}/lod", &["get"]),
-        ("/api/v1/models/{id}/lod/patches/{node}", &["get"]),
-        ("/api/v1/models/{id}/lod/file", &["get"]),
-        ("/api/v1/models/{id}/render", &["get"]),
-        ("/api/v1/models/{id}/render/buffers", &["get"]),
-        ("/api/v1/models/{id}/render/callouts", &["get"]),
-        ("/api/v1/jobs", &["get"]),
-        ("/api/v1/jobs/{id}", &["get"]),
-        ("/api/v1/jobs/{id}/cancel", &["post"]),
-        ("/api/v1/models/{id}/parts", &["get", "post"]),
-        ("/api/v1/models/{id}/events", &["get"]),
-        ("/api/v1/parts/{id}", &["get", "patch", "delete"]),
-        ("/api/v1/parts/{id}/vertices", &["get"]),
-        ("/api/v1/parts/{id}/contents", &["get", "post", "put"]),
-        ("/api/v1/parts/{id}/contents/{content_id}", &["delete"]),
-        ("/api/v1/contents", &["get", "post"]),
-        ("/api/v1/contents/{id}", &["get", "put", "delete"]),
-        ("/api/v1/contents/{id}/revisions", &["get"]),
-        ("/api/v1/contents/{id}/revisions/{number}", &["get"]),
-        ("/api/v1/contents/{id}/diff", &["get"]),
-        ("/api/v1/contents/{id}/revert", &["post"]),
-        ("/api/v1/contents/{id}/parts", &["get"]),
-        ("/api/v1/contents/{id}/attachments", &["get", "post"]),
-        (
-            "/api/v1/contents/{id}/attachments/{attachment_id}",
-            &["put", "delete"],
-        ),
-        ("/api/v1/attachments", &["post"]),
-        ("/api/v1/attachments/{id}", &["get"]),
-        ("/api/v1/attachments/{id}/download", &["get"]),
-        ("/api/v1/search", &["get"]),
-        ("/api/v1/preview", &["post"]),
-        ("/api/v1/openapi.json", &["get"]),
-        ("/api/v1/health", &["get"]),
-    ];
-    assert_eq!(
-        paths.len(),
-        expected.len(),
-        "documented paths: {:?}",
-        paths.keys()
-    );
-    for (path, methods) in expected {
-        let item = paths
-            .get(*path)
-            .unwrap_or_else(|| panic!("{path} not documented"));
-        for m in *methods {
-            let op = &item[*m];
-            assert!(op["responses"].is_object(), "{m} {path}");
-            assert!(op["summary"].is_string(), "{m} {path}");
-        }
-        assert_eq!(item.as_object().unwrap().len(), methods.len(), "{path}");
-    }
-    // Every $ref resolves.
-    let schemas = doc["components"]["schemas"].as_object().unwrap();
-    let text = doc.to_string();
-    for part in text.split("#/components/schemas/").skip(1) {
-        let name: String = part.chars().take_while(|c| c.is_alphanumeric()).collect();
-        assert!(schemas.contains_key(&name), "unresolved $ref {name}");
-    }
+    assert!(doc.json()["openapi"].as_str().unwrap().starts_with("3."));
 }

@@ -23,6 +23,8 @@ use meshopt::{
 };
 use rustc_hash::FxHashMap as HashMap;
 
+use super::patch::{EdgeUses, edge_ends};
+
 /// Blob magic, first 4 bytes.
 pub const BLOB_MAGIC: [u8; 4] = *b"MWP2";
 const COMPRESSION_NONE: u8 = 0;
@@ -227,27 +229,14 @@ pub enum CodecError {
 
 /// Vertices on an edge used by exactly one triangle (the patch border).
 pub fn border_vertices(indices: &[u32], vertex_count: usize) -> Vec<bool> {
-    let mut edges: Vec<u64> = indices
-        .chunks_exact(3)
-        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-        .map(|(a, b)| ((a.min(b) as u64) << 32) | a.max(b) as u64)
-        .collect();
-    edges.sort_unstable();
     let mut border = vec![false; vertex_count];
-    let mut i = 0;
-    while i < edges.len() {
-        let mut j = i + 1;
-        while j < edges.len() && edges[j] == edges[i] {
-            j += 1;
+    let edges = EdgeUses::of(indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
+    for key in edges.border() {
+        let (a, b) = edge_ends(key);
+        if (a as usize) < vertex_count && (b as usize) < vertex_count {
+            border[a as usize] = true;
+            border[b as usize] = true;
         }
-        if j - i == 1 {
-            let (a, b) = ((edges[i] >> 32) as usize, edges[i] as u32 as usize);
-            if a < vertex_count && b < vertex_count {
-                border[a] = true;
-                border[b] = true;
-            }
-        }
-        i = j;
     }
     border
 }

@@ -99,23 +99,12 @@ mod tests {
     use crate::lod::{BuildOptions, build_mesh, cut_uniform};
     use crate::mesh::{Mesh, synth::Relief};
     use crate::progress::NoProgress;
-    use std::collections::HashMap;
 
     fn boundary_edges(ids: impl Iterator<Item = [u32; 3]>) -> Vec<(u32, u32)> {
-        let mut count: HashMap<(u32, u32), u32> = HashMap::new();
-        for t in ids {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                *count.entry((a.min(b), a.max(b))).or_default() += 1;
-            }
-        }
-        let mut v: Vec<_> = count
-            .into_iter()
-            .filter(|&(_, c)| c == 1)
-            .map(|(e, _)| e)
-            .collect();
-        v.sort_unstable();
-        v
+        crate::lod::patch::EdgeUses::of(ids)
+            .border()
+            .map(crate::lod::patch::edge_ends)
+            .collect()
     }
 
     #[test]

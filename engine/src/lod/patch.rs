@@ -26,6 +26,38 @@ pub fn edge_key(a: u32, b: u32) -> u64 {
     ((lo as u64) << 32) | hi as u64
 }
 
+/// The edges of a set of triangles, each with the number of triangles that use it: the one
+/// border rule of the hierarchy. An edge used by exactly one triangle is on the border; by
+/// two, interior; by three or more, non-manifold (counted as interior by [`EdgeUses::border`]).
+#[derive(Debug, Clone, Default)]
+pub struct EdgeUses {
+    /// Every triangle's three edge keys ([`edge_key`]), sorted.
+    keys: Vec<u64>,
+}
+
+impl EdgeUses {
+    /// The edges of `triangles` (three vertex ids each, in whatever id space the caller uses).
+    pub fn of(triangles: impl Iterator<Item = [u32; 3]>) -> EdgeUses {
+        let mut keys: Vec<u64> = triangles
+            .flat_map(|[a, b, c]| [edge_key(a, b), edge_key(b, c), edge_key(c, a)])
+            .collect();
+        keys.sort_unstable();
+        EdgeUses { keys }
+    }
+
+    /// Each distinct edge key with its number of uses, in key order.
+    pub fn counts(&self) -> impl Iterator<Item = (u64, usize)> + '_ {
+        self.keys
+            .chunk_by(|a, b| a == b)
+            .map(|run| (run[0], run.len()))
+    }
+
+    /// The border: edges used by exactly one triangle, in key order.
+    pub fn border(&self) -> impl Iterator<Item = u64> + '_ {
+        self.counts().filter(|&(_, n)| n == 1).map(|(k, _)| k)
+    }
+}
+
 /// The two original vertex IDs of an edge key.
 #[inline]
 pub fn edge_ends(key: u64) -> (u32, u32) {
@@ -40,28 +72,13 @@ impl BuildPatch {
     /// Edges used by exactly one triangle of this patch (its border), as sorted keys of
     /// original IDs. Edges used by three or more triangles (non-manifold) count as interior.
     pub fn border_edges(&self) -> Vec<u64> {
-        let mut keys: Vec<u64> = self
-            .indices
-            .chunks_exact(3)
-            .flat_map(|t| {
-                let [a, b, c] = [t[0], t[1], t[2]].map(|i| self.ids[i as usize]);
-                [edge_key(a, b), edge_key(b, c), edge_key(c, a)]
-            })
-            .collect();
-        keys.sort_unstable();
-        let mut border = Vec::new();
-        let mut i = 0;
-        while i < keys.len() {
-            let mut j = i + 1;
-            while j < keys.len() && keys[j] == keys[i] {
-                j += 1;
-            }
-            if j - i == 1 {
-                border.push(keys[i]);
-            }
-            i = j;
-        }
-        border
+        EdgeUses::of(
+            self.indices
+                .chunks_exact(3)
+                .map(|t| [t[0], t[1], t[2]].map(|i| self.ids[i as usize])),
+        )
+        .border()
+        .collect()
     }
 
     /// Byte offset of the original IDs in the scratch record.

@@ -17,7 +17,7 @@
 
 use super::hausdorff::simplification_distance;
 use super::partition::{Triangles, partition};
-use super::patch::{BuildPatch, edge_key};
+use super::patch::{BuildPatch, EdgeUses, edge_key};
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 use rustc_hash::FxHashMap as HashMap;
 
@@ -263,26 +263,19 @@ fn id_border(mesh: &BuildPatch, indices: &[u32]) -> Vec<u64> {
 
 /// [`id_border`], and whether some edge is used by more than two triangles (one sort for both).
 fn border_and_overuse(mesh: &BuildPatch, indices: &[u32]) -> (Vec<u64>, bool) {
-    let mut keys: Vec<u64> = indices
-        .chunks_exact(3)
-        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-        .map(|(a, b)| edge_key(mesh.ids[a as usize], mesh.ids[b as usize]))
-        .collect();
-    keys.sort_unstable();
+    let edges = EdgeUses::of(
+        indices
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]].map(|i| mesh.ids[i as usize])),
+    );
     let mut border = Vec::new();
     let mut overused = false;
-    let mut i = 0;
-    while i < keys.len() {
-        let mut j = i + 1;
-        while j < keys.len() && keys[j] == keys[i] {
-            j += 1;
-        }
-        match j - i {
-            1 => border.push(keys[i]),
+    for (key, uses) in edges.counts() {
+        match uses {
+            1 => border.push(key),
             2 => {}
             _ => overused = true,
         }
-        i = j;
     }
     (border, overused)
 }

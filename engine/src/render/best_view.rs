@@ -9,7 +9,7 @@
 //! (its patches are then back-face culled). The first candidate is kept when it already sees
 //! most of what it draws.
 
-use super::{Cut, Highlight, Model, Outputs, RenderError, RenderOptions, Renderer};
+use super::{Cut, Highlight, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
 use crate::camera::Camera;
 use crate::lod::{Culling, FormatError, LodFile};
 use glam::{Quat, Vec3};
@@ -209,7 +209,7 @@ fn directions(normal: Vec3, opts: &BestViewOptions) -> Vec<Vec3> {
 /// Finds a camera that frames `part` (its original vertex ids and geometry) unoccluded.
 pub fn best_view(
     renderer: &Renderer,
-    model: &Model,
+    model: &RenderModel,
     part: &RoaringBitmap,
     geometry: &PartGeometry,
     opts: &BestViewOptions,

@@ -8,7 +8,8 @@
 //! candidate label positions around the anchor at growing distances, then along the image
 //! sides; overlaps with placed labels are forbidden, and the cost is the leader
 //! length plus penalties for leaders crossing leaders or labels, labels covering anchors, and
-//! labels hiding the model rather than the background.
+//! labels hiding the model rather than the background ([`place`]; the browser's overlay runs
+//! the same rule, `static/js/parts/place.js`).
 
 use crate::camera::Camera;
 use glam::{Vec2, Vec3};
@@ -70,10 +71,16 @@ impl LayoutOptions {
 
 /// Axis-aligned rectangle in pixels (x right, y down).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[cfg_attr(feature = "openapi", schema(as = CalloutRect))]
 pub struct Rect {
+    /// Left edge.
     pub x: f32,
+    /// Top edge.
     pub y: f32,
+    /// Width.
     pub w: f32,
+    /// Height.
     pub h: f32,
 }
 
@@ -111,35 +118,48 @@ impl Rect {
     }
 }
 
-/// Where a label went.
+/// Where a label went: around its anchor, or along an image side.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "lowercase")]
 pub enum Placement {
+    /// Near the anchor.
     Around,
+    /// Along the left side of the image.
     Left,
+    /// Along the right side.
     Right,
+    /// Along the top.
     Top,
+    /// Along the bottom.
     Bottom,
 }
 
 /// One placed callout.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Callout {
+    /// Part id.
     pub part: i64,
+    /// The part's title.
     pub title: String,
-    /// The text drawn in the label (cut to `max_chars`).
+    /// The text drawn in the label (long titles cut with "...").
     pub text: String,
-    /// Anchor in pixels and its view depth.
+    /// Anchor in pixels: x, y (y down).
     pub anchor: [f32; 2],
+    /// View depth of the anchor.
     pub depth: f32,
+    /// The label's rectangle in pixels.
     pub label: Rect,
-    /// Leader line from the anchor to the label's nearest point.
+    /// Leader line from the anchor to the label's nearest point: two pixel points x, y.
     pub leader: [[f32; 2]; 2],
+    /// Where the label went.
     pub placement: Placement,
 }
 
 /// Why a part got no callout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum HiddenReason {
     /// Behind the camera.
@@ -152,10 +172,56 @@ pub enum HiddenReason {
     NoRoom,
 }
 
+/// A part that got no callout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct HiddenCallout {
+    /// Part id.
     pub part: i64,
+    /// Why.
     pub reason: HiddenReason,
+}
+
+/// A label to place ([`place`]): its anchor and its size, in pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LabelBox {
+    /// Anchor x, y (y down).
+    pub anchor: [f32; 2],
+    /// Label width and height.
+    pub size: [f32; 2],
+}
+
+/// A part's label as [`place`] got it: the part, its anchor and its label size.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct CalloutLabel {
+    /// Part id.
+    pub part: i64,
+    /// Anchor in pixels: x, y (y down).
+    pub anchor: [f32; 2],
+    /// Label width and height in pixels (text in the 5×7 font plus padding).
+    pub size: [f32; 2],
+}
+
+impl CalloutLabel {
+    /// The placement input of this label.
+    pub fn label_box(&self) -> LabelBox {
+        LabelBox {
+            anchor: self.anchor,
+            size: self.size,
+        }
+    }
+}
+
+/// Where [`place`] put a label.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Placed {
+    /// The label's rectangle.
+    pub label: Rect,
+    /// End of the leader line from the anchor: the label's point nearest to the anchor.
+    pub end: [f32; 2],
+    /// Where the label went.
+    pub placement: Placement,
 }
 
 /// A callout layout for one image.
@@ -165,6 +231,11 @@ pub struct CalloutLayout {
     pub height: u32,
     pub callouts: Vec<Callout>,
     pub hidden: Vec<HiddenCallout>,
+    /// The input of the placement ([`place`]): every part whose anchor is visible, in
+    /// priority order, with its label size. `callouts` and the `no_room` entries of `hidden`
+    /// are these parts.
+    #[serde(default)]
+    pub labels: Vec<CalloutLabel>,
 }
 
 /// Why a layout could not be made.
@@ -250,7 +321,11 @@ fn surface_share(depth: &[f32], width: u32, r: &Rect) -> f32 {
 }
 
 /// Lays out callouts for `parts` seen by `camera` (image size from the camera). `depth` is the
-/// frame's linear depth buffer (`None`: no occlusion test).
+/// frame's linear depth buffer (`None`: no occlusion test, no cover penalty).
+///
+/// The visible parts (in input order, which is their priority) get their titles cut to
+/// `max_chars` and a label of the 5×7 font's size plus padding; [`place`] then places the
+/// labels (§2.2), with `depth` for its cover penalty.
 pub fn layout(
     parts: &[CalloutPart],
     camera: &Camera,
@@ -302,88 +377,179 @@ pub fn layout(
             });
         }
     }
+    // Texts and label sizes.
     let scale = opts.font_scale.max(1);
     let pad = opts.padding as f32;
-    let gap = opts.margin as f32;
-    let anchors: Vec<Vec2> = visible.iter().map(|v| v.1).collect();
-    let mut placed: Vec<Callout> = Vec::new();
-    for (k, (p, a, d)) in visible.iter().enumerate() {
+    let mut texts = Vec::with_capacity(visible.len());
+    for (p, a, _) in &visible {
         let text = cut_title(&p.title, opts.max_chars);
         let lw = font::text_width(&text, scale) as f32 + 2.0 * pad;
         let lh = (font::LINE_H * scale) as f32 + 2.0 * pad;
-        let mut candidates: Vec<(Rect, Placement, f32)> = Vec::new();
-        let dirs = [
-            Vec2::new(1.0, -1.0),
-            Vec2::new(-1.0, -1.0),
-            Vec2::new(1.0, 1.0),
-            Vec2::new(-1.0, 1.0),
-            Vec2::new(1.0, 0.0),
-            Vec2::new(-1.0, 0.0),
-            Vec2::new(0.0, -1.0),
-            Vec2::new(0.0, 1.0),
-        ];
-        for dist in [16.0f32, 32.0, 56.0, 88.0, 128.0] {
-            for dir in dirs {
-                let c = *a + Vec2::new(dir.x * (dist + lw * 0.5), dir.y * (dist * 0.75 + lh * 0.5));
-                candidates.push((
-                    Rect {
-                        x: (c.x - lw * 0.5).round(),
-                        y: (c.y - lh * 0.5).round(),
-                        w: lw,
-                        h: lh,
-                    },
-                    Placement::Around,
-                    0.0,
-                ));
+        out.labels.push(CalloutLabel {
+            part: p.part,
+            anchor: [a.x, a.y],
+            size: [lw, lh],
+        });
+        texts.push(text);
+    }
+    let boxes: Vec<LabelBox> = out.labels.iter().map(CalloutLabel::label_box).collect();
+    let spots = place(&boxes, w, h, opts.margin as f32, depth);
+    for (((p, a, d), text), spot) in visible.iter().zip(texts).zip(spots) {
+        match spot {
+            Some(s) => out.callouts.push(Callout {
+                part: p.part,
+                title: p.title.clone(),
+                text,
+                anchor: [a.x, a.y],
+                depth: *d,
+                label: s.label,
+                leader: [[a.x, a.y], s.end],
+                placement: s.placement,
+            }),
+            None => out.hidden.push(HiddenCallout {
+                part: p.part,
+                reason: HiddenReason::NoRoom,
+            }),
+        }
+    }
+    Ok(out)
+}
+
+/// Directions of the candidates around an anchor, in the order they are tried.
+const AROUND_DIRECTIONS: [[f32; 2]; 8] = [
+    [1.0, -1.0],
+    [-1.0, -1.0],
+    [1.0, 1.0],
+    [-1.0, 1.0],
+    [1.0, 0.0],
+    [-1.0, 0.0],
+    [0.0, -1.0],
+    [0.0, 1.0],
+];
+
+/// Distances (pixels) of the candidates around an anchor, nearest first.
+const AROUND_DISTANCES: [f32; 5] = [16.0, 32.0, 56.0, 88.0, 128.0];
+
+/// Cost added to candidates along an image side.
+const SIDE_COST: f32 = 40.0;
+/// Cost of a leader crossing a placed leader.
+const CROSS_LEADER_PENALTY: f32 = 1000.0;
+/// Cost of a leader crossing a placed label, or of a label crossing a placed leader.
+const CROSS_LABEL_PENALTY: f32 = 500.0;
+/// Cost of a label covering (or coming within [`ANCHOR_GAP`] of) another part's anchor.
+const ANCHOR_PENALTY: f32 = 300.0;
+/// Gap around other anchors for [`ANCHOR_PENALTY`].
+const ANCHOR_GAP: f32 = 4.0;
+
+/// The candidate rectangles of a `size` label for `anchor` in a `width`×`height` image, in
+/// the order [`place`] tries them, with their kind and base cost: around the anchor (each
+/// distance of [`AROUND_DISTANCES`] in every direction of [`AROUND_DIRECTIONS`], the label's
+/// centre offset by the distance plus half the label horizontally and by ¾ of the distance
+/// plus half the label vertically), then along the left and right sides (rows `margin`
+/// apart from the anchor's outwards, alternately below and above), then along the top and
+/// bottom (columns half a label plus `margin` apart, alternately right and left). Positions
+/// are rounded to whole pixels; candidates may lie outside the image (`place` skips them).
+fn candidates(
+    anchor: Vec2,
+    size: Vec2,
+    width: u32,
+    height: u32,
+    margin: f32,
+) -> Vec<(Rect, Placement, f32)> {
+    let (a, lw, lh, gap) = (anchor, size.x, size.y, margin);
+    let (w, h) = (width as f32, height as f32);
+    let mut out = Vec::new();
+    for dist in AROUND_DISTANCES {
+        for [dx, dy] in AROUND_DIRECTIONS {
+            let c = a + Vec2::new(dx * (dist + lw * 0.5), dy * (dist * 0.75 + lh * 0.5));
+            out.push((
+                Rect {
+                    x: (c.x - lw * 0.5).round(),
+                    y: (c.y - lh * 0.5).round(),
+                    w: lw,
+                    h: lh,
+                },
+                Placement::Around,
+                0.0,
+            ));
+        }
+    }
+    let step = lh + gap;
+    for i in 0..((h / step) as i32 + 1) {
+        for sign in [1.0f32, -1.0] {
+            let y = (a.y - lh * 0.5 + sign * i as f32 * step).round();
+            for (x, place) in [(gap, Placement::Left), (w - gap - lw, Placement::Right)] {
+                out.push((Rect { x, y, w: lw, h: lh }, place, SIDE_COST));
             }
         }
-        let step = lh + gap;
-        for i in 0..((h as f32 / step) as i32 + 1) {
-            for sign in [1.0f32, -1.0] {
-                let y = (a.y - lh * 0.5 + sign * i as f32 * step).round();
-                for (x, place) in [
-                    (gap, Placement::Left),
-                    (w as f32 - gap - lw, Placement::Right),
-                ] {
-                    candidates.push((Rect { x, y, w: lw, h: lh }, place, 40.0));
-                }
+    }
+    let hstep = lw * 0.5 + gap;
+    for i in 0..((w / hstep) as i32 + 1) {
+        for sign in [1.0f32, -1.0] {
+            let x = (a.x - lw * 0.5 + sign * i as f32 * hstep).round();
+            for (y, place) in [(gap, Placement::Top), (h - gap - lh, Placement::Bottom)] {
+                out.push((Rect { x, y, w: lw, h: lh }, place, SIDE_COST));
             }
         }
-        let hstep = lw * 0.5 + gap;
-        for i in 0..((w as f32 / hstep) as i32 + 1) {
-            for sign in [1.0f32, -1.0] {
-                let x = (a.x - lw * 0.5 + sign * i as f32 * hstep).round();
-                for (y, place) in [
-                    (gap, Placement::Top),
-                    (h as f32 - gap - lh, Placement::Bottom),
-                ] {
-                    candidates.push((Rect { x, y, w: lw, h: lh }, place, 40.0));
-                }
-            }
-        }
+    }
+    out
+}
+
+/// Places labels (system paper §2.2) in a `width`×`height` image: greedily, in the order of
+/// `items` (their priority), each label at the cheapest of its candidates (see
+/// [`candidates`]: around the anchor at growing distances, then along the image sides) that
+/// lies at least `margin` inside the image and at least `margin` away from every label placed
+/// before. The cost is the leader's length (anchor to the label's nearest point), plus
+/// [`SIDE_COST`] along the sides, [`CROSS_LEADER_PENALTY`] for each placed leader the leader
+/// crosses, [`CROSS_LABEL_PENALTY`] for each placed label the leader crosses and each placed
+/// leader the label crosses, [`ANCHOR_PENALTY`] for each other item's anchor the label covers,
+/// and, with a `cover` depth buffer (row-major, `width`×`height`, finite on the model),
+/// [`COVER_PENALTY`] times the share of the label hiding the model rather than the background.
+/// The first candidate of strictly lowest cost wins. `None` where no candidate is free.
+///
+/// The browser's overlay runs the same rule (`static/js/parts/place.js`, `placeLabels`,
+/// checked against this one by `tests/browser/callouts.test.mjs`).
+pub fn place(
+    items: &[LabelBox],
+    width: u32,
+    height: u32,
+    margin: f32,
+    cover: Option<&[f32]>,
+) -> Vec<Option<Placed>> {
+    let (w, h, gap) = (width as f32, height as f32, margin);
+    let anchors: Vec<Vec2> = items.iter().map(|it| Vec2::from(it.anchor)).collect();
+    // Placed labels and their leaders.
+    let mut placed: Vec<(Rect, Vec2, Vec2)> = Vec::new();
+    let mut out = Vec::with_capacity(items.len());
+    for (k, item) in items.iter().enumerate() {
+        let a = anchors[k];
         let mut best: Option<(f32, Rect, Placement, Vec2)> = None;
-        for (r, place, base) in candidates {
-            if r.x < gap || r.y < gap || r.x + r.w > w as f32 - gap || r.y + r.h > h as f32 - gap {
+        for (r, kind, base) in candidates(a, Vec2::from(item.size), width, height, gap) {
+            if r.x < gap || r.y < gap || r.x + r.w > w - gap || r.y + r.h > h - gap {
                 continue;
             }
-            if placed.iter().any(|c| c.label.overlaps(&r, gap)) {
+            if placed.iter().any(|(l, _, _)| l.overlaps(&r, gap)) {
                 continue;
             }
-            let end = r.closest(*a);
+            let end = r.closest(a);
             let mut cost = base + a.distance(end);
-            if let Some(buf) = depth {
-                cost += COVER_PENALTY * surface_share(buf, w, &r);
+            // Penalties are never negative: a candidate already as dear as the best loses.
+            if best.as_ref().is_some_and(|b| cost >= b.0) {
+                continue;
             }
-            for c in &placed {
-                let (s0, s1) = (Vec2::from(c.leader[0]), Vec2::from(c.leader[1]));
-                if segments_cross(*a, end, s0, s1) {
-                    cost += 1000.0;
+            if let Some(buf) = cover {
+                cost += COVER_PENALTY * surface_share(buf, width, &r);
+            }
+            for (l, s0, s1) in &placed {
+                let (s0, s1) = (*s0, *s1);
+                if segments_cross(a, end, s0, s1) {
+                    cost += CROSS_LEADER_PENALTY;
                 }
-                if c.label.segment_crosses(*a, end) {
-                    cost += 500.0;
+                if l.segment_crosses(a, end) {
+                    cost += CROSS_LABEL_PENALTY;
                 }
                 if r.segment_crosses(s0, s1) {
-                    cost += 500.0;
+                    cost += CROSS_LABEL_PENALTY;
                 }
             }
             for (j, other) in anchors.iter().enumerate() {
@@ -395,35 +561,26 @@ pub fn layout(
                             w: 0.0,
                             h: 0.0,
                         },
-                        4.0,
+                        ANCHOR_GAP,
                     )
                 {
-                    cost += 300.0;
+                    cost += ANCHOR_PENALTY;
                 }
             }
             if best.as_ref().is_none_or(|b| cost < b.0) {
-                best = Some((cost, r, place, end));
+                best = Some((cost, r, kind, end));
             }
         }
-        match best {
-            Some((_, r, place, end)) => placed.push(Callout {
-                part: p.part,
-                title: p.title.clone(),
-                text,
-                anchor: [a.x, a.y],
-                depth: *d,
+        out.push(best.map(|(_, r, kind, end)| {
+            placed.push((r, a, end));
+            Placed {
                 label: r,
-                leader: [[a.x, a.y], [end.x, end.y]],
-                placement: place,
-            }),
-            None => out.hidden.push(HiddenCallout {
-                part: p.part,
-                reason: HiddenReason::NoRoom,
-            }),
-        }
+                end: [end.x, end.y],
+                placement: kind,
+            }
+        }));
     }
-    out.callouts = placed;
-    Ok(out)
+    out
 }
 
 /// Colours of drawn callouts.
@@ -640,6 +797,72 @@ mod tests {
         let mut img = vec![[90u8, 90, 90, 255]; 400 * 300];
         draw(&mut img, &l, &CalloutStyle::default());
         assert!(img.contains(&[16, 16, 16, 255]), "text drawn");
+    }
+
+    #[test]
+    fn place_is_the_layouts_placement() {
+        let c = cam();
+        let parts: Vec<CalloutPart> = (0..30)
+            .map(|i| {
+                let t = i as f32 * 0.7;
+                let title = "Carving ".repeat(1 + i as usize % 5);
+                part(i, 0.5 * t.cos(), 0.4 * t.sin(), 0.0, &title)
+            })
+            .collect();
+        // Background on the left, model on the right: the cover penalty matters.
+        let depth: Vec<f32> = (0..200 * 150)
+            .map(|i| if i % 200 < 100 { f32::INFINITY } else { 6.0 })
+            .collect();
+        let c = Camera {
+            width: 200,
+            height: 150,
+            ..c
+        };
+        let opts = LayoutOptions::for_height(150);
+        let l = layout(&parts, &c, Some(&depth), &opts).expect("layout");
+        assert_eq!(l.labels.len(), 30);
+        let boxes: Vec<LabelBox> = l.labels.iter().map(CalloutLabel::label_box).collect();
+        let spots = place(&boxes, 200, 150, opts.margin as f32, Some(&depth));
+        let mut shown = l.callouts.iter();
+        let mut no_room = l.hidden.iter().filter(|h| h.reason == HiddenReason::NoRoom);
+        for (label, spot) in l.labels.iter().zip(&spots) {
+            match spot {
+                Some(s) => {
+                    let c = shown.next().expect("a callout");
+                    assert_eq!(c.part, label.part);
+                    assert_eq!(
+                        (c.label, c.leader[1], c.placement),
+                        (s.label, s.end, s.placement)
+                    );
+                    assert_eq!([c.label.w, c.label.h], label.size);
+                }
+                None => assert_eq!(no_room.next().map(|h| h.part), Some(label.part)),
+            }
+        }
+        assert!(shown.next().is_none() && no_room.next().is_none());
+        assert!(
+            spots.iter().any(Option::is_none),
+            "crowded: some labels find no room"
+        );
+        let without = place(&boxes, 200, 150, opts.margin as f32, None);
+        assert_ne!(spots, without, "the cover penalty changes the layout");
+        // One label alone: the shortest leader, straight up (not the first candidate, up
+        // and to the right).
+        let one = place(
+            &[LabelBox {
+                anchor: [100.5, 75.5],
+                size: [40.0, 15.0],
+            }],
+            200,
+            150,
+            4.0,
+            None,
+        );
+        let s = one[0].expect("placed");
+        assert_eq!(s.placement, Placement::Around);
+        assert_eq!((s.label.x, s.label.y), (81.0, 49.0));
+        assert_eq!(s.end, [100.5, 64.0]);
+        assert!(place(&[], 10, 10, 4.0, None).is_empty());
     }
 
     #[test]

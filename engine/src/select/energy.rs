@@ -38,6 +38,7 @@ use super::buffers::Buffers;
 /// `band_prior` are this implementation's (see the module documentation and
 /// [`super::seeds`]).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(default, deny_unknown_fields)]
 pub struct EnergyParams {
     /// Weight of texture colour (data and smoothness terms).

@@ -7,7 +7,7 @@
 //! - [`seeds`]: seeds of each tool — markup strokes (Lazy Snapping), the heavy lasso's inner and
 //!   outer markers (§4.2), the plain lasso's polygon.
 //! - [`energy`]: the data term (eq. 2–3) and the smoothness term (eq. 4).
-//! - [`cut`]: the graph over covered pixels, 8-connected, solved by Boykov–Kolmogorov max-flow
+//! - [`graph_cut`]: the graph over covered pixels, 8-connected, solved by Boykov–Kolmogorov max-flow
 //!   ([`maxflow_grid`]) (eq. 1).
 //! - [`pipeline`]: one call from strokes and buffers to selected pixels, per tool.
 //! - [`backproject`]: selected pixels to original vertex ids through the id and depth buffers
@@ -18,8 +18,8 @@
 
 pub mod backproject;
 pub mod buffers;
-pub mod cut;
 pub mod energy;
+pub mod graph_cut;
 pub mod mask;
 pub mod maxflow;
 pub mod maxflow_grid;

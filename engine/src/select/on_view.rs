@@ -11,14 +11,14 @@ use roaring::RoaringBitmap;
 use super::SelectError;
 use super::backproject::{BackProjectOptions, BackProjection, back_project};
 use super::buffers::Buffers;
-use super::cut::CutStats;
 use super::energy::EnergyParams;
+use super::graph_cut::CutStats;
 use super::mask::{self, StrokeMask};
 use super::pipeline::{Tool, select_pixels};
 use super::point::{self, PickedPoint};
 use crate::camera::Camera;
 use crate::lod::Culling;
-use crate::render::{Cut, Model, Outputs, RenderError, RenderOptions, Renderer};
+use crate::render::{Cut, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
 
 /// What selects on the view: strokes for a tool, or a click.
 #[derive(Debug, Clone, Copy)]
@@ -71,7 +71,7 @@ pub enum ViewSelectError {
 /// be combined with (its sums are counted, see [`BackProjection`]).
 pub fn select_on_view(
     renderer: &Renderer,
-    model: &Model,
+    model: &RenderModel,
     camera: &Camera,
     input: Input<'_>,
     pixel_error: f32,

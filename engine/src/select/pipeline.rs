@@ -1,11 +1,11 @@
 //! From strokes to selected pixels, per tool (system paper §4.1, §4.2): the plain lasso takes
 //! its polygon; markup and the heavy lasso seed the graph ([`super::seeds`]) and cut it
-//! ([`super::cut`]), keeping what is connected to the foreground seeds.
+//! ([`super::graph_cut`]), keeping what is connected to the foreground seeds.
 
 use super::SelectError;
 use super::buffers::Buffers;
-use super::cut::{self, CutStats};
 use super::energy::EnergyParams;
+use super::graph_cut::{self, CutStats};
 use super::mask::StrokeMask;
 use super::seeds;
 
@@ -45,7 +45,7 @@ pub struct PixelSelection {
 }
 
 /// Runs `tool` on the strokes of `mask` over the rendered `buffers`. `color_cue`: whether the
-/// model has colours (see [`cut::graph_cut`]).
+/// model has colours (see [`graph_cut::graph_cut`]).
 pub fn select_pixels(
     tool: Tool,
     mask: &StrokeMask,
@@ -75,8 +75,8 @@ pub fn select_pixels(
             } else {
                 seeds::heavy_lasso(mask, buffers)?
             };
-            let (mut selected, stats) = cut::graph_cut(buffers, &s, params, color_cue)?;
-            cut::keep_connected_to_seeds(&mut selected, &s);
+            let (mut selected, stats) = graph_cut::graph_cut(buffers, &s, params, color_cue)?;
+            graph_cut::keep_connected_to_seeds(&mut selected, &s);
             (selected, Some(stats))
         }
     };

@@ -12,13 +12,15 @@ use crate::lod::{LodFile, NO_GROUP};
 
 /// A picked point.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct PickedPoint {
     /// The surface point under the pixel centre.
     pub position: [f32; 3],
     /// The original id of the full-resolution vertex nearest to it.
     pub vertex: u32,
-    /// Pixel.
+    /// Pixel column.
     pub x: u32,
+    /// Pixel row (from the top).
     pub y: u32,
 }
 

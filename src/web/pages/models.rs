@@ -89,14 +89,15 @@ fn viewer_json(
     model: &Model,
     parts: &[PartView],
     can_edit: bool,
-    render: &crate::config::RenderSettings,
+    config: &crate::app::client::ClientConfig,
 ) -> String {
     let json = serde_json::json!({
         "model": model,
         "parts": parts,
         "can_edit": can_edit,
-        // The largest view the server renders (selection masks must fit it).
-        "view_limits": {"max_side": render.max_side, "max_pixels": render.max_pixels},
+        // The server's limits, as GET /api/v1/config gives them (selection masks must fit
+        // its largest view).
+        "config": config,
     })
     .to_string();
     json.replace('<', "\\u003c")
@@ -176,7 +177,7 @@ async fn show(
         viewer_enabled: ready && crate::web::vendor::available(),
         viewer_message,
         import_map: crate::web::vendor::IMPORT_MAP,
-        viewer_data: viewer_json(&model, &views, can_edit, &state.settings.render),
+        viewer_data: viewer_json(&model, &views, can_edit, &state.client_config()),
         layout,
         description_html: markdown::render(&model.description),
         bbox,

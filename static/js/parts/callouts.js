@@ -1,33 +1,17 @@
 // Callouts (system paper §2.2): each part's title in a label joined to its anchor by a leader
 // line, as an HTML overlay. A label is shown when its anchor is in view and not hidden behind
 // the surface, and when the part is large enough on screen at the current viewing scale;
-// labels are placed greedily (selected and hovered first, then by on-screen size) at the
-// cheapest free position around their anchor, never overlapping one another.
+// labels are placed greedily (selected and hovered first, then by on-screen size) by the
+// engine's rule (./place.js, the same as the server's `render/callouts`, without the cover
+// penalty: the overlay has no depth buffer), never overlapping one another.
+
+import { placeLabels } from './place.js';
 
 const SVG = 'http://www.w3.org/2000/svg';
-const DISTANCES = [36, 64, 100, 150];
-const ANGLES = [-40, -140, 40, 140, -90, 90, 0, 180].map((a) => (a * Math.PI) / 180);
+/** Smallest gap (px) between labels and from the overlay's border. */
 const GAP = 4;
 /** Smallest on-screen part radius (px) at which its label shows. */
 export const MIN_PART_PIXELS = 3;
-
-function overlaps(a, b) {
-  return a.x < b.x + b.w + GAP && b.x < a.x + a.w + GAP && a.y < b.y + b.h + GAP && b.y < a.y + a.h + GAP;
-}
-
-function crosses(p1, p2, p3, p4) {
-  const d = (a, b, c) => (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-  const d1 = d(p3, p4, p1);
-  const d2 = d(p3, p4, p2);
-  const d3 = d(p1, p2, p3);
-  const d4 = d(p1, p2, p4);
-  return d1 * d2 < 0 && d3 * d4 < 0;
-}
-
-/** Point of box `b` nearest to `p`. */
-function nearestOnBox(b, p) {
-  return { x: Math.min(Math.max(p.x, b.x), b.x + b.w), y: Math.min(Math.max(p.y, b.y), b.y + b.h) };
-}
 
 export class Callouts {
   /**
@@ -88,42 +72,28 @@ export class Callouts {
     const shown = items
       .filter((it) => it.radiusPx >= MIN_PART_PIXELS || it.id === state.selected || it.id === state.hovered)
       .sort((a, b) => b.priority - a.priority);
-    const boxes = [];
-    const leaders = [];
-    const anchors = shown.map((it) => ({ x: it.x, y: it.y }));
+    const labels = shown.map((it) => this.label(it.id, it.title));
+    const spots = placeLabels(
+      shown.map((it, k) => ({ anchor: [it.x, it.y], size: [labels[k].w, labels[k].h] })),
+      width,
+      height,
+      GAP,
+    );
     const visible = new Set();
     this.placed = [];
-    for (const it of shown) {
-      const l = this.label(it.id, it.title);
-      let best = null;
-      for (const dist of DISTANCES) {
-        for (const angle of ANGLES) {
-          const cx = it.x + Math.cos(angle) * dist;
-          const cy = it.y + Math.sin(angle) * dist;
-          const box = { x: cx - (Math.cos(angle) < -0.3 ? l.w : Math.cos(angle) > 0.3 ? 0 : l.w / 2), y: cy - l.h / 2, w: l.w, h: l.h };
-          if (box.x < GAP || box.y < GAP || box.x + box.w > width - GAP || box.y + box.h > height - GAP) continue;
-          if (boxes.some((b) => overlaps(b, box))) continue;
-          const end = nearestOnBox(box, it);
-          let cost = dist;
-          for (const [a, b] of leaders) if (crosses(it, end, a, b)) cost += 80;
-          for (const a of anchors) {
-            if (a.x >= box.x - GAP && a.x <= box.x + box.w + GAP && a.y >= box.y - GAP && a.y <= box.y + box.h + GAP) cost += 120;
-          }
-          if (!best || cost < best.cost) best = { box, end, cost };
-        }
-        if (best && best.cost < DISTANCES[DISTANCES.length - 1]) break;
-      }
-      if (!best) continue;
-      boxes.push(best.box);
-      leaders.push([{ x: it.x, y: it.y }, best.end]);
+    shown.forEach((it, k) => {
+      const spot = spots[k];
+      if (!spot) return;
+      const l = labels[k];
+      const box = spot.label;
       visible.add(it.id);
-      this.placed.push({ id: it.id, box: best.box, anchor: { x: it.x, y: it.y } });
-      l.el.style.transform = `translate(${Math.round(best.box.x)}px, ${Math.round(best.box.y)}px)`;
+      this.placed.push({ id: it.id, box, anchor: { x: it.x, y: it.y }, end: { x: spot.end[0], y: spot.end[1] } });
+      l.el.style.transform = `translate(${Math.round(box.x)}px, ${Math.round(box.y)}px)`;
       l.el.style.visibility = 'visible';
       l.el.hidden = false;
       l.el.classList.toggle('selected', it.id === state.selected);
       l.el.classList.toggle('hovered', it.id === state.hovered);
-    }
+    });
     for (const [id, l] of this.labels) {
       if (!visible.has(id)) l.el.hidden = true;
     }
@@ -136,7 +106,7 @@ export class Callouts {
     this.svg.setAttribute('viewBox', `0 0 ${width} ${height}`);
     while (this.svg.firstChild) this.svg.firstChild.remove();
     for (const p of this.placed) {
-      const end = nearestOnBox(p.box, p.anchor);
+      const end = p.end;
       const cls = p.id === state.selected ? ' selected' : p.id === state.hovered ? ' hovered' : '';
       const line = document.createElementNS(SVG, 'line');
       line.setAttribute('x1', String(p.anchor.x));

@@ -232,25 +232,24 @@ export class SelectController {
   async click(p) {
     if (this.tool !== 'point' || this.busy) return;
     const view = this.host.camera();
-    const size = fitSize(view.width, view.height, this.session.limits);
+    const size = fitSize(view.width, view.height, await this.session.viewLimits());
     const request = { tool: 'point', mode: 'replace', camera: this.requestCamera(view, size), point: [p.x * size.sx, p.y * size.sy] };
-    await this.request(request, null, {}, () => this.click(p));
+    await this.request(request, null, {});
   }
 
   /** Rasterises `strokes` for the view, sends them; true when a draft came back. */
   async send(tool, strokes, view, options = {}) {
-    const size = fitSize(view.width, view.height, this.session.limits);
+    const size = fitSize(view.width, view.height, await this.session.viewLimits());
     const request = { tool, mode: this.mode, camera: this.requestCamera(view, size) };
-    return this.request(request, () => encodeMask(rasterise(strokes, size), size.width, size.height), options, () => this.send(tool, strokes, view, options));
+    return this.request(request, () => encodeMask(rasterise(strokes, size), size.width, size.height), options);
   }
 
   /** Sends one selection (`makeMask` resolves to the PNG, or is null); true on a draft. */
-  async request(request, makeMask, options, retry) {
+  async request(request, makeMask, options) {
     if (this.busy) return false;
     this.inFlight = true;
     this.setError('');
     this.render();
-    let retrying = false;
     try {
       const mask = makeMask ? await makeMask() : null;
       await this.session.select(request, mask, options);
@@ -258,14 +257,12 @@ export class SelectController {
       this.showTop();
       return true;
     } catch (e) {
-      // A server with smaller view limits says so: send again at the size it allows.
-      retrying = this.session.learnLimits(e);
-      if (!retrying && !e.cancelled) this.setError(e.message);
+      if (!e.cancelled) this.setError(e.message);
     } finally {
       this.inFlight = false;
       this.render();
     }
-    return retrying ? retry() : false;
+    return false;
   }
 
   undo() {

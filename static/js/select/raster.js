@@ -7,15 +7,15 @@
 /** Labels of the wire format. */
 export const LABEL = Object.freeze({ NONE: 0, FOREGROUND: 1, BACKGROUND: 2, HEAVY: 3, LASSO: 4 });
 
-/** The server's default view limits (`--render-max-side`, `--render-max-pixels`). */
-export const DEFAULT_LIMITS = Object.freeze({ maxSide: 4096, maxPixels: 2048 * 2048 });
+/** No limit (the server's own come from GET /api/v1/config, `view_limits`). */
+const UNLIMITED = Object.freeze({ maxSide: Infinity, maxPixels: Infinity });
 
 /**
  * The mask size for a view of `width`×`height` CSS pixels: the same size when the server
  * allows it, else scaled down uniformly (both sides by the same factor, rounded down).
  * @returns {{width: number, height: number, sx: number, sy: number}} sx, sy: mask px per CSS px
  */
-export function fitSize(width, height, limits = DEFAULT_LIMITS) {
+export function fitSize(width, height, limits = UNLIMITED) {
   const w = Math.max(1, Math.round(width));
   const h = Math.max(1, Math.round(height));
   const s = Math.min(1, limits.maxSide / Math.max(w, h), Math.sqrt(limits.maxPixels / (w * h)));

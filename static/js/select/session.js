@@ -5,9 +5,6 @@
 
 import { RoaringBitmap } from '../parts/roaring.js';
 import { ApiError } from './api.js';
-import { DEFAULT_LIMITS } from './raster.js';
-
-const LIMITS_MESSAGE = /at most (\d+) pixels a side and (\d+) pixels/;
 
 export class SelectionSession {
   /**
@@ -23,7 +20,16 @@ export class SelectionSession {
     this.stack = []; // [{draft, bitmap}], oldest first
     this.busy = false;
     this.generation = 0; // bumped by cancel and edit: answers to older requests are dropped
-    this.limits = { ...DEFAULT_LIMITS };
+    this.limits = null; // {maxSide, maxPixels}: the server's largest view
+  }
+
+  /** The server's view limits: given by the page, else asked once (GET /api/v1/config). */
+  async viewLimits() {
+    if (!this.limits) {
+      const { view_limits: v } = await this.api.get('/api/v1/config');
+      this.limits = { maxSide: v.max_side, maxPixels: v.max_pixels };
+    }
+    return this.limits;
   }
 
   /** The newest draft ({draft, bitmap}) or null. */
@@ -77,16 +83,6 @@ export class SelectionSession {
     form.append('request', JSON.stringify(body));
     form.append('mask', mask, 'mask.png');
     return this.api.post(url, form);
-  }
-
-  /** Learns smaller view limits from the server's refusal; true when they changed. */
-  learnLimits(err) {
-    const m = err instanceof ApiError && err.status === 400 ? LIMITS_MESSAGE.exec(err.message) : null;
-    if (!m) return false;
-    const limits = { maxSide: Number(m[1]), maxPixels: Number(m[2]) };
-    if (limits.maxSide >= this.limits.maxSide && limits.maxPixels >= this.limits.maxPixels) return false;
-    this.limits = limits;
-    return true;
   }
 
   /** Goes back to the previous draft (the newest is discarded on the server). */

@@ -102,9 +102,9 @@ class Viewer {
         this.requestFrame();
       },
     });
-    this.viewLimits = data.view_limits
-      ? { maxSide: data.view_limits.max_side, maxPixels: data.view_limits.max_pixels }
-      : null;
+    // The server's limits (GET /api/v1/config, embedded in the page).
+    const limits = data.config?.view_limits;
+    this.viewLimits = limits ? { maxSide: limits.max_side, maxPixels: limits.max_pixels } : null;
     this.selection = data.can_edit ? this.makeSelection() : null;
     if (this.selection) this.toolbar.addGroup(this.selection.element);
     this.store.onChange(() => this.partsChanged());

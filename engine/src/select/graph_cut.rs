@@ -22,13 +22,17 @@ pub const HARD: f32 = 1e9;
 
 /// What a cut did.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct CutStats {
-    /// Pixels in the graph (the cropped window) and pixels it decided.
+    /// Pixels in the graph (the cropped window).
     pub nodes: usize,
+    /// Pixels the cut decided (neither seed nor off the model).
     pub unknown: usize,
     /// Value of the maximum flow (the minimum energy, hard parts excluded).
     pub flow: f64,
+    /// Building the graph, milliseconds.
     pub build_ms: f64,
+    /// Solving the maximum flow, milliseconds.
     pub solve_ms: f64,
 }
 
