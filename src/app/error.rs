@@ -23,6 +23,10 @@ pub enum AppError {
     /// The input is larger than allowed.
     #[error("{0}")]
     TooLarge(String),
+    /// A content edit based on a stale revision that did not merge cleanly (or was not to be
+    /// saved merged): the three versions and the merge.
+    #[error("edit conflict: your edit is based on revision {} but the current revision is {}", .0.base_number, .0.theirs.number)]
+    EditConflict(Box<super::contents::EditConflict>),
     /// The store refused or failed (keeps its stale-revision details).
     #[error(transparent)]
     Store(#[from] StoreError),

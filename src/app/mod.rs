@@ -10,12 +10,14 @@
 //! * [`models`]: the model registry (one opener and cache of `.mwlod` files, one readiness
 //!   check), and deleting models;
 //! * [`parts`]: every create, edit and delete of a part, each a revision;
+//! * [`contents`]: saving content edits, a stale one merged three-way with what was saved since;
 //! * [`selections`]: draft selections and their confirmation into parts;
 //! * [`events`]: the live-update bus;
 //! * [`views`]: best views and thumbnails of parts, in the background;
 //! * [`client`]: the limits and settings clients size their requests to.
 
 pub mod client;
+pub mod contents;
 pub mod error;
 pub mod events;
 pub mod models;

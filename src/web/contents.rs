@@ -8,6 +8,7 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Auth;
 use super::{ApiError, AppState, PageQuery};
+use crate::app::contents::OnStale;
 use crate::app::events::{Event, EventKind};
 use crate::store::attachments::{self, Attachment};
 use crate::store::contents::{self, Content, ContentEdit, Revision, RevisionSummary};
@@ -119,11 +120,6 @@ pub struct SaveContent {
     pub thumbnail_attachment_id: Option<Option<i64>>,
 }
 
-fn validate(state: &AppState, edit: &ContentEdit) -> Result<(), ApiError> {
-    let l = &state.settings.limits;
-    Ok(edit.validate(l.title_chars, l.body_bytes)?)
-}
-
 /// List contents
 ///
 /// Most recently changed first, each with its rendered HTML (without attachments).
@@ -164,7 +160,7 @@ async fn create(
         body: body.body,
         comment: body.comment,
     };
-    validate(&state, &edit)?;
+    state.validate_edit(&edit)?;
     let content =
         contents::create(&state.db, &edit, body.thumbnail_attachment_id, auth.id()).await?;
     state.sync_search().await;
@@ -213,23 +209,18 @@ async fn save(
         body: body.body,
         comment: body.comment,
     };
-    validate(&state, &edit)?;
-    let content = contents::update(
-        &state.db,
-        *id,
-        body.base_revision,
-        &edit,
-        body.thumbnail_attachment_id,
-        auth.id(),
-    )
-    .await
-    .map_err(|e| ApiError::from(e).with_yours(&edit))?;
-    state.sync_search().await;
-    state
-        .events
-        .publish(Event::content(EventKind::ContentUpdated, *id));
+    let saved = state
+        .save_content(
+            auth.id(),
+            *id,
+            body.base_revision,
+            &edit,
+            body.thumbnail_attachment_id,
+            OnStale::Report,
+        )
+        .await?;
     let att = attachments::list_for_content(&state.db, *id).await?;
-    Ok(HttpResponse::Ok().json(ContentView::new(content, Some(att))))
+    Ok(HttpResponse::Ok().json(ContentView::new(saved.content, Some(att))))
 }
 
 /// Delete a content

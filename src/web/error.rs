@@ -13,8 +13,10 @@ use crate::app::AppError;
 use crate::search::SearchError;
 use crate::store::StoreError;
 use crate::store::contents::{ContentEdit, Revision};
+use crate::wiki::merge::Merged;
 
-/// The 409 body of a content save based on a stale revision: both versions, to merge.
+/// The 409 body of a content save based on a stale revision: the three versions and their
+/// three-way merge.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct EditConflict {
     /// What went wrong, for people.
@@ -23,10 +25,18 @@ pub struct EditConflict {
     pub base_revision: i64,
     /// The number of the current revision.
     pub current_revision: i64,
+    /// The revision the rejected save was based on, in full (the common base of the merge;
+    /// `null` when that number names no revision).
+    pub base: Option<Revision>,
     /// The current revision in full ("theirs").
     pub current: Revision,
     /// The rejected edit ("yours"); `null` for a revert.
     pub yours: Option<ContentEdit>,
+    /// The three-way merge of yours and theirs against the base: with `conflicts` 0 the
+    /// merged text to save (on `current_revision`); otherwise the overlaps are between
+    /// `<<<<<<< yours` / `=======` / `>>>>>>> theirs` markers, to resolve. `null` for a revert
+    /// or without a base.
+    pub merged: Option<Merged>,
 }
 
 /// An error of an API route.
@@ -54,6 +64,10 @@ pub enum ApiError {
         current: Box<Revision>,
         /// The rejected edit ("yours").
         yours: Option<Box<ContentEdit>>,
+        /// The base revision, when known.
+        base_text: Option<Box<Revision>>,
+        /// The three-way merge, when there is a base and an edit.
+        merged: Option<Box<Merged>>,
     },
     /// 413: body too large.
     PayloadTooLarge(String),
@@ -88,18 +102,6 @@ impl ApiError {
     pub fn internal(err: impl std::fmt::Display) -> ApiError {
         tracing::error!(error = %err, "internal error");
         ApiError::Internal(err.to_string())
-    }
-
-    /// Attaches the rejected edit to a stale-revision error.
-    pub fn with_yours(self, edit: &ContentEdit) -> ApiError {
-        match self {
-            ApiError::StaleRevision { base, current, .. } => ApiError::StaleRevision {
-                base,
-                current,
-                yours: Some(Box::new(edit.clone())),
-            },
-            other => other,
-        }
     }
 
     /// Seconds for a `Retry-After` header, if the error has one.
@@ -172,12 +174,16 @@ impl ResponseError for ApiError {
                 base,
                 current,
                 yours,
+                base_text,
+                merged,
             } => resp.json(EditConflict {
                 error: self.message(),
                 base_revision: *base,
                 current_revision: current.number,
+                base: base_text.as_deref().cloned(),
                 current: Revision::clone(current),
                 yours: yours.as_deref().cloned(),
+                merged: merged.as_deref().cloned(),
             }),
             _ => resp.json(super::openapi::ErrorBody {
                 error: self.message(),
@@ -194,6 +200,16 @@ impl From<AppError> for ApiError {
             AppError::Conflict(m) => ApiError::Conflict(m),
             AppError::UnsupportedMedia(m) => ApiError::UnsupportedMediaType(m),
             AppError::TooLarge(m) => ApiError::PayloadTooLarge(m),
+            AppError::EditConflict(c) => {
+                let c = *c;
+                ApiError::StaleRevision {
+                    base: c.base_number,
+                    current: Box::new(c.theirs),
+                    yours: Some(Box::new(c.yours)),
+                    base_text: c.base.map(Box::new),
+                    merged: c.merged.map(Box::new),
+                }
+            }
             AppError::Store(e) => e.into(),
             AppError::Render(e) => e.into(),
             AppError::Internal(m) => ApiError::Internal(m),
@@ -217,6 +233,8 @@ impl From<StoreError> for ApiError {
                 base,
                 current,
                 yours: None,
+                base_text: None,
+                merged: None,
             },
             e @ (StoreError::Db(_) | StoreError::Migrate(_)) => ApiError::internal(e),
         }

@@ -9,11 +9,13 @@ use askama::Template;
 use serde::Deserialize;
 
 use super::{CsrfOnly, Layout, lf, redirect, render, render_status};
+use crate::app::AppError;
+use crate::app::contents::{EditConflict, OnStale};
+use crate::store::Page;
 use crate::store::assignments::{self, AssignedPart};
 use crate::store::attachments::{self, Attachment};
 use crate::store::contents::{self, Content, ContentEdit, Revision, RevisionSummary};
 use crate::store::users::Role;
-use crate::store::{Page, StoreError};
 use crate::web::auth::{CsrfForm, PageAuth, PageForm};
 use crate::web::contents::{DiffQuery, RevisionDiff, diff_of};
 use crate::web::{AppState, PageError};
@@ -92,14 +94,28 @@ struct ContentPage {
     attachments: Vec<Attachment>,
     parts: Vec<AssignedPart>,
     can_edit: bool,
+    /// After a save merged with a concurrent one: that revision.
+    merged_with: Option<Revision>,
+}
+
+/// Query of the content page.
+#[derive(Debug, Deserialize)]
+struct ShowQuery {
+    /// The save just made was merged with this revision (shown as a notice).
+    merged: Option<i64>,
 }
 
 async fn show(
     state: web::Data<AppState>,
     auth: PageAuth,
     id: web::Path<i64>,
+    query: web::Query<ShowQuery>,
 ) -> Result<HttpResponse, PageError> {
     let content = contents::get(&state.db, *id).await?;
+    let merged_with = match query.merged {
+        Some(n) => contents::revision(&state.db, content.id, n).await.ok(),
+        None => None,
+    };
     let current = contents::revision(&state.db, content.id, content.current_revision).await?;
     let attachments = attachments::list_for_content(&state.db, content.id).await?;
     let parts = assignments::parts_for_content(&state.db, content.id).await?;
@@ -112,6 +128,7 @@ async fn show(
         content,
         attachments,
         parts,
+        merged_with,
     })
 }
 
@@ -190,18 +207,13 @@ async fn new_page(auth: PageAuth) -> Result<HttpResponse, PageError> {
     render(&EditPage::blank(Layout::new(&auth, "New content")))
 }
 
-fn validate(state: &AppState, edit: &ContentEdit) -> Result<(), StoreError> {
-    let l = &state.settings.limits;
-    edit.validate(l.title_chars, l.body_bytes)
-}
-
 async fn create(
     state: web::Data<AppState>,
     post: PageForm<EditForm>,
 ) -> Result<HttpResponse, PageError> {
     post.auth.require(Role::Editor)?;
     let edit = post.form.edit();
-    let invalid = validate(&state, &edit).err();
+    let invalid = state.validate_edit(&edit).err();
     if post.form.action == "preview" || invalid.is_some() {
         let mut page = EditPage::blank(Layout::new(&post.auth, "New content"));
         page.preview_html = markdown::render(&edit.body);
@@ -254,10 +266,81 @@ struct MergePage {
     base: i64,
     theirs: Revision,
     theirs_html: String,
-    yours: ContentEdit,
-    body_diff_html: String,
-    title_differs: bool,
-    caption_differs: bool,
+    /// Title, caption and body to put in the form: the merge (conflicts between markers), or
+    /// without a base your edit as it was.
+    form: ContentEdit,
+    /// Conflicts left in the form.
+    conflicts: usize,
+    /// The base is known: the diffs below are against it.
+    three_way: bool,
+    /// What they changed since the base (three-way), or from theirs to yours.
+    their_changes_html: String,
+    /// What you changed since the base (three-way only).
+    your_changes_html: String,
+    /// Field changes worth a line: (field, before, after), theirs then yours.
+    field_changes: Vec<(String, String, String, String)>,
+}
+
+impl MergePage {
+    fn new(layout: Layout, content_id: i64, c: EditConflict) -> MergePage {
+        let EditConflict {
+            base_number,
+            base,
+            theirs,
+            yours,
+            merged,
+        } = c;
+        let theirs_html = markdown::render(&theirs.body);
+        match (base, merged) {
+            (Some(base), Some(m)) => {
+                let mut field_changes = Vec::new();
+                for (name, b, t, y) in [
+                    ("Title", &base.title, &theirs.title, yours.title.trim()),
+                    (
+                        "Caption",
+                        &base.caption,
+                        &theirs.caption,
+                        yours.caption.as_str(),
+                    ),
+                ] {
+                    if b != t || b != y {
+                        field_changes.push((name.to_string(), b.clone(), t.clone(), y.to_string()));
+                    }
+                }
+                MergePage {
+                    layout,
+                    content_id,
+                    base: base_number,
+                    their_changes_html: diff::diff(&base.body, &theirs.body, 3).html,
+                    your_changes_html: diff::diff(&base.body, &yours.body, 3).html,
+                    theirs_html,
+                    conflicts: m.conflicts,
+                    form: ContentEdit {
+                        title: m.title,
+                        caption: m.caption,
+                        body: m.body,
+                        comment: yours.comment,
+                    },
+                    three_way: true,
+                    field_changes,
+                    theirs,
+                }
+            }
+            _ => MergePage {
+                layout,
+                content_id,
+                base: base_number,
+                their_changes_html: diff::diff(&theirs.body, &yours.body, 3).html,
+                your_changes_html: String::new(),
+                theirs_html,
+                conflicts: 0,
+                form: yours,
+                three_way: false,
+                field_changes: Vec::new(),
+                theirs,
+            },
+        }
+    }
 }
 
 async fn save(
@@ -269,7 +352,7 @@ async fn save(
     let content = contents::get(&state.db, *id).await?;
     let edit = post.form.edit();
     let base = post.form.base_revision.unwrap_or(content.current_revision);
-    let invalid = validate(&state, &edit).err();
+    let invalid = state.validate_edit(&edit).err();
     if post.form.action == "preview" || invalid.is_some() {
         let attachments = attachments::list_for_content(&state.db, content.id).await?;
         let error = invalid.map(|e| e.to_string()).unwrap_or_default();
@@ -296,30 +379,28 @@ async fn save(
             },
         );
     }
-    match contents::update(&state.db, content.id, base, &edit, None, post.auth.id()).await {
-        Ok(saved) => {
-            state.sync_search().await;
-            state.events.publish(crate::app::events::Event::content(
-                crate::app::events::EventKind::ContentUpdated,
-                saved.id,
-            ));
-            Ok(redirect(&format!("/contents/{}", saved.id)))
-        }
-        Err(StoreError::StaleRevision { base, current }) => {
-            let theirs = *current;
+    // A stale edit that merges cleanly with what was saved since is saved merged, as wikis do;
+    // an overlap comes back as the merge page.
+    match state
+        .save_content(
+            post.auth.id(),
+            content.id,
+            base,
+            &edit,
+            None,
+            OnStale::SaveCleanMerge,
+        )
+        .await
+    {
+        Ok(saved) => Ok(redirect(&match saved.merged_with {
+            Some(r) => format!("/contents/{}?merged={}", saved.content.id, r.number),
+            None => format!("/contents/{}", saved.content.id),
+        })),
+        Err(AppError::EditConflict(c)) => {
+            let layout = Layout::new(&post.auth, format!("Edit conflict: {}", c.theirs.title));
             render_status(
                 StatusCode::CONFLICT,
-                &MergePage {
-                    layout: Layout::new(&post.auth, format!("Edit conflict: {}", theirs.title)),
-                    content_id: content.id,
-                    base,
-                    theirs_html: markdown::render(&theirs.body),
-                    body_diff_html: diff::diff(&theirs.body, &edit.body, 3).html,
-                    title_differs: theirs.title != edit.title.trim(),
-                    caption_differs: theirs.caption != edit.caption,
-                    theirs,
-                    yours: edit,
-                },
+                &MergePage::new(layout, content.id, *c),
             )
         }
         Err(e) => Err(e.into()),
