@@ -336,6 +336,11 @@ pub async fn revert(
             .map(str::to_string)
             .unwrap_or_else(|| format!("Reverted to revision {number}")),
     };
+    if edit.comment.chars().count() > 500 {
+        return Err(StoreError::Invalid(
+            "comment must be at most 500 characters".into(),
+        ));
+    }
     update(
         db,
         id,

@@ -22,6 +22,11 @@ const FILES: &[(&str, &str, &str)] = &[
         "text/javascript; charset=utf-8",
         include_str!("../../static/jobs.js"),
     ),
+    (
+        "login.js",
+        "text/javascript; charset=utf-8",
+        include_str!("../../static/login.js"),
+    ),
 ];
 
 macro_rules! js_modules {

@@ -206,6 +206,10 @@ fn pages_work_without_javascript() {
     for n in ["merged", "theirs", "first"] {
         assert!(history.contains(n), "{n} in history");
     }
+    // Reverting is never one click from the history: it leads to the revision, which says
+    // what a revert does and asks why.
+    assert!(!history.contains(&format!("action=\"/contents/{id}/revert\"")));
+    assert!(history.contains(&format!("href=\"/contents/{id}/revisions/2#revert\"")));
     let diff = editor
         .get(&format!("/contents/{id}/diff?from=1&to=3"))
         .text();
@@ -213,17 +217,21 @@ fn pages_work_without_javascript() {
     assert!(diff.contains("diff-del") && diff.contains("diff-ins"));
     let old = editor.get(&format!("/contents/{id}/revisions/2")).text();
     assert!(old.contains("carved dragons") && old.contains("Revert to this revision"));
+    assert!(old.contains("nothing is lost") && old.contains("name=\"comment\""));
     let r = editor.post_form(
         &format!("/contents/{id}/revert"),
         &[
             ("csrf_token", &csrf),
             ("revision", "2"),
             ("base_revision", "3"),
+            ("comment", "back to the dragons"),
         ],
     );
     assert_eq!(r.status, 303);
     let view = editor.get(&format!("/contents/{id}")).text();
     assert!(view.contains("Theirs: carved dragons") && view.contains("Revision 4"));
+    let history = editor.get(&format!("/contents/{id}/history")).text();
+    assert!(history.contains("back to the dragons"), "the revert's comment");
 
     // Upload an attachment from the edit page (CSRF field first), then see it listed.
     let r = editor.upload(

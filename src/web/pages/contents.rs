@@ -492,6 +492,9 @@ struct RevertForm {
     csrf_token: String,
     revision: i64,
     base_revision: i64,
+    /// Why (the revert's edit comment).
+    #[serde(default)]
+    comment: String,
 }
 
 impl CsrfForm for RevertForm {
@@ -507,12 +510,13 @@ async fn revert(
 ) -> Result<HttpResponse, PageError> {
     post.auth.require(Role::Editor)?;
     let f = &post.form;
+    let comment = f.comment.trim();
     contents::revert(
         &state.db,
         *id,
         f.revision,
         Some(f.base_revision),
-        None,
+        (!comment.is_empty()).then_some(comment),
         post.auth.id(),
     )
     .await?;
