@@ -38,6 +38,16 @@ pub enum AppError {
     Internal(String),
 }
 
+impl From<crate::jobs::JobError> for AppError {
+    fn from(e: crate::jobs::JobError) -> AppError {
+        match e {
+            crate::jobs::JobError::Store(s) => AppError::Store(s),
+            crate::jobs::JobError::Invalid(m) => AppError::Invalid(m),
+            crate::jobs::JobError::Io(e) => AppError::internal(e),
+        }
+    }
+}
+
 impl AppError {
     /// Invalid input, with a message.
     pub fn invalid(msg: impl Into<String>) -> AppError {

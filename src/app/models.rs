@@ -271,3 +271,39 @@ impl ModelRegistry {
         ids
     }
 }
+
+impl super::App {
+    /// Deletes model `id` (by `user_id`) with its parts and assignments (contents stay): a build
+    /// still running stops first and leaves nothing behind; the registry forgets the model and
+    /// its LOD file is removed.
+    pub async fn delete_model(&self, user_id: i64, id: i64) -> Result<models::Model, AppError> {
+        self.jobs.cancel_for_model(id, Some(user_id)).await?;
+        let model = models::delete(&self.db, id, user_id).await?;
+        self.models.forget(model.id);
+        self.sync_search().await;
+        if let Some(lod) = &model.lod_path {
+            remove_model_file(&self.settings.data_dir, lod).await;
+        }
+        Ok(model)
+    }
+}
+
+/// Removes a model's LOD file (or directory) if `relative` is a plain path inside `models/`
+/// of the data directory; anything else is left alone.
+async fn remove_model_file(data_dir: &Path, relative: &str) {
+    let rel = Path::new(relative);
+    let plain = rel.components().all(|c| matches!(c, Component::Normal(_)));
+    if !plain || !rel.starts_with("models") || rel.components().count() < 2 {
+        tracing::warn!(path = relative, "not removing LOD path outside models/");
+        return;
+    }
+    let path = data_dir.join(rel);
+    let result = match tokio::fs::metadata(&path).await {
+        Ok(m) if m.is_dir() => tokio::fs::remove_dir_all(&path).await,
+        Ok(_) => tokio::fs::remove_file(&path).await,
+        Err(_) => Ok(()),
+    };
+    if let Err(e) = result {
+        tracing::warn!(path = %path.display(), error = %e, "cannot remove LOD file");
+    }
+}

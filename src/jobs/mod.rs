@@ -337,6 +337,15 @@ fn plain_relative(rel: &str) -> Option<&Path> {
         .then_some(p)
 }
 
+/// The model an uploaded scan is for.
+#[derive(Debug, Clone, Copy)]
+pub enum UploadTarget<'a> {
+    /// A new model with these fields.
+    New(&'a NewModel),
+    /// An existing model without a built scan (pending, failed or cancelled): a retry.
+    Existing(i64),
+}
+
 /// A received upload: a complete file in `uploads/` under a temporary name.
 #[derive(Debug)]
 pub struct ReceivedScan {
@@ -479,11 +488,12 @@ impl Jobs {
         }
     }
 
-    /// Stores an uploaded scan and queues its build; returns the new model and job.
+    /// Stores an uploaded scan and queues its build, for a new model or for an existing one
+    /// without a built scan (see [`jobs::create_for_model`]); returns the model and the job.
     pub async fn submit_upload(
         &self,
         scan: ReceivedScan,
-        model: &NewModel,
+        target: UploadTarget<'_>,
         user_id: i64,
     ) -> Result<(Model, Job), JobError> {
         let name = format!("src-{}.{}", crate::random_hex(12), scan.extension);
@@ -501,7 +511,15 @@ impl Jobs {
             options: JobOptions::default(),
             running_pid: None,
         };
-        match jobs::create_with_model(&self.inner.db, model, &new, user_id).await {
+        let created = match target {
+            UploadTarget::New(model) => {
+                jobs::create_with_model(&self.inner.db, model, &new, user_id).await
+            }
+            UploadTarget::Existing(id) => {
+                jobs::create_for_model(&self.inner.db, id, &new, user_id).await
+            }
+        };
+        match created {
             Ok((model, job)) => {
                 tracing::info!(
                     job = job.id,

@@ -218,6 +218,54 @@ pub async fn create_with_model(
 ) -> Result<(Model, Job)> {
     let mut tx = db.begin().await?;
     let created = models::create_tx(&mut tx, model, user_id).await?;
+    let id = insert_tx(&mut tx, created.id, job, user_id).await?;
+    let created = models::get_tx(&mut tx, created.id).await?;
+    let job = get_tx(&mut tx, id).await?;
+    tx.commit().await?;
+    Ok((created, job))
+}
+
+/// Queues `job` to build the scan of existing model `model_id` again: a model whose build
+/// failed or was cancelled, or that never had one (status `pending` or `failed`, no job of it
+/// queued or running). The model goes back to `pending`. [`StoreError::Conflict`] otherwise
+/// (a ready model keeps its scan: its parts name that scan's vertices).
+pub async fn create_for_model(
+    db: &Db,
+    model_id: i64,
+    job: &NewJob,
+    user_id: i64,
+) -> Result<(Model, Job)> {
+    let mut tx = db.begin().await?;
+    let model = models::get_tx(&mut tx, model_id).await?;
+    if !matches!(model.status, ModelStatus::Pending | ModelStatus::Failed) {
+        return Err(StoreError::Conflict(format!(
+            "model {model_id} is {}: only a model without a built scan (pending, or its build \
+             failed or was cancelled) takes a new one",
+            model.status.as_str()
+        )));
+    }
+    let active: i64 = sqlx::query_scalar(
+        "SELECT COUNT(*) FROM jobs WHERE model_id = ? AND status IN ('queued', 'running')",
+    )
+    .bind(model_id)
+    .fetch_one(&mut *tx)
+    .await?;
+    if active > 0 {
+        return Err(StoreError::Conflict(format!(
+            "model {model_id} already has a build queued or running"
+        )));
+    }
+    set_model_status_tx(&mut tx, model_id, ModelStatus::Pending, None).await?;
+    let id = insert_tx(&mut tx, model_id, job, user_id).await?;
+    let model = models::get_tx(&mut tx, model_id).await?;
+    let job = get_tx(&mut tx, id).await?;
+    tx.commit().await?;
+    Ok((model, job))
+}
+
+/// Inserts `job` for `model_id` (running at once when it names its runner), with its audit
+/// entry; returns its id.
+async fn insert_tx(tx: &mut Tx, model_id: i64, job: &NewJob, user_id: i64) -> Result<i64> {
     let now = crate::now_rfc3339();
     let (status, started) = match job.running_pid {
         Some(_) => (JobStatus::Running, Some(now.clone())),
@@ -230,7 +278,7 @@ pub async fn create_with_model(
          VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING id",
     )
     .bind(job.kind)
-    .bind(created.id)
+    .bind(model_id)
     .bind(status)
     .bind(&job.source_path)
     .bind(&job.source_name)
@@ -242,24 +290,21 @@ pub async fn create_with_model(
     .bind(&now)
     .bind(started)
     .bind(&now)
-    .fetch_one(&mut *tx)
+    .fetch_one(&mut **tx)
     .await?;
     if job.running_pid.is_some() {
-        set_model_status_tx(&mut tx, created.id, ModelStatus::Building, None).await?;
+        set_model_status_tx(tx, model_id, ModelStatus::Building, None).await?;
     }
     super::audit::record(
-        &mut tx,
+        tx,
         Some(user_id),
         "job.create",
         "job",
         Some(id),
-        serde_json::json!({"model_id": created.id, "kind": job.kind, "source_name": job.source_name}),
+        serde_json::json!({"model_id": model_id, "kind": job.kind, "source_name": job.source_name}),
     )
     .await?;
-    let created = models::get_tx(&mut tx, created.id).await?;
-    let job = get_tx(&mut tx, id).await?;
-    tx.commit().await?;
-    Ok((created, job))
+    Ok(id)
 }
 
 async fn set_model_status_tx(

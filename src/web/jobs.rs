@@ -19,7 +19,7 @@ use utoipa::{IntoParams, ToSchema};
 use super::auth::Auth;
 use super::multipart;
 use super::{ApiError, AppState, PageQuery};
-use crate::jobs::{JobError, ReceivedScan, SCAN_EXTENSIONS, scan_extension};
+use crate::jobs::{JobError, ReceivedScan, SCAN_EXTENSIONS, UploadTarget, scan_extension};
 use crate::store::jobs::{self, CancelOutcome, Job, JobStatus};
 use crate::store::models::{Model, NewModel};
 use crate::store::users::Role;
@@ -44,6 +44,21 @@ impl From<JobError> for ApiError {
             JobError::Invalid(m) => ApiError::bad(m),
             JobError::Io(e) => ApiError::internal(format!("I/O: {e}")),
         }
+    }
+}
+
+/// Whether model `id` can take a new scan (the store checks again when queueing).
+pub async fn check_retry(state: &AppState, id: i64) -> Result<(), ApiError> {
+    let model = crate::store::models::get(&state.db, id).await?;
+    match model.status {
+        crate::store::models::ModelStatus::Pending | crate::store::models::ModelStatus::Failed => {
+            Ok(())
+        }
+        other => Err(ApiError::Conflict(format!(
+            "model {id} is {}: only a model without a built scan (pending, or its build failed \
+             or was cancelled) takes a new one",
+            other.as_str()
+        ))),
     }
 }
 
@@ -101,9 +116,12 @@ pub(crate) fn extension_of(filename: &str) -> Result<String, ApiError> {
 #[derive(Debug, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
 struct UploadQuery {
-    /// Title of the new model (1–300 characters).
-    #[param(value_type = String, required = true)]
+    /// Title of the new model (1–300 characters); not used with `model`.
     title: Option<String>,
+    /// An existing model without a built scan (pending, or its build failed or was
+    /// cancelled) that gets this scan instead of a new model: a retry. 409 for a ready model
+    /// or one whose build is queued or running.
+    model: Option<i64>,
     /// The scan's file name: only its extension (.ply, .obj, .gltf, .glb, .stl, .off) is
     /// used, to pick the format; it is shown to users but never used as a path.
     #[param(value_type = String, required = true)]
@@ -125,7 +143,8 @@ pub struct UploadedModel {
 /// Upload a scan and queue its LOD build
 ///
 /// The raw request body is the scan, streamed to disk (never held in memory); then a model
-/// (status `pending`) and its build job are created. The `Location` header names the job.
+/// (status `pending`) and its build job are created, or, with `model`, the build of that
+/// existing model is queued again with the new scan. The `Location` header names the job.
 #[utoipa::path(post, path = "/api/v1/models/upload", tag = "jobs",
     params(UploadQuery),
     request_body(content = super::openapi::Binary, content_type = "application/octet-stream",
@@ -133,6 +152,8 @@ pub struct UploadedModel {
     responses(
         (status = 202, description = "Queued", body = UploadedModel,
             headers(("Location" = String, description = "The job: /api/v1/jobs/{id}"))),
+        (status = 409, description = "`model` already has a built scan, or a build queued or running",
+            body = super::openapi::ErrorBody),
         (status = 413, description = "Larger than --max-model-upload-mb",
             body = super::openapi::ErrorBody)),
     security(("sessionCookie" = ["admin"])))]
@@ -144,10 +165,17 @@ async fn upload(
     payload: web::Payload,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Admin)?;
-    let title = check_title(
-        q.title.as_deref().unwrap_or(""),
-        state.settings.limits.title_chars,
-    )?;
+    let title = match q.model {
+        Some(_) => String::new(),
+        None => check_title(
+            q.title.as_deref().unwrap_or(""),
+            state.settings.limits.title_chars,
+        )?,
+    };
+    if let Some(id) = q.model {
+        // Before the body is read: a model that cannot take a scan is refused at once.
+        check_retry(&state, id).await?;
+    }
     let filename = q
         .filename
         .as_deref()
@@ -170,7 +198,11 @@ async fn upload(
         description: q.description.replace("\r\n", "\n"),
         source_name: display,
     };
-    let (model, job) = state.jobs.submit_upload(scan, &model, auth.id()).await?;
+    let target = match q.model {
+        Some(id) => UploadTarget::Existing(id),
+        None => UploadTarget::New(&model),
+    };
+    let (model, job) = state.jobs.submit_upload(scan, target, auth.id()).await?;
     Ok(HttpResponse::Accepted()
         .insert_header((header::LOCATION, format!("/api/v1/jobs/{}", job.id)))
         .json(UploadedModel { model, job }))

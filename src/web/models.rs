@@ -1,13 +1,10 @@
 //! `/api/v1/models`: scans. Anyone logged in reads; editors patch descriptive fields;
 //! admins create and delete.
 
-use std::path::{Component, Path};
-
 use actix_web::{HttpResponse, web};
 
 use super::auth::Auth;
 use super::{ApiError, AppState, PageQuery};
-use crate::Settings;
 use crate::store::models::{self, Model, ModelPatch, NewModel};
 use crate::store::users::Role;
 
@@ -111,33 +108,6 @@ async fn delete(
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Admin)?;
-    // A build still running for this model stops (and leaves nothing behind).
-    state.jobs.cancel_for_model(*id, Some(auth.id())).await?;
-    let model = models::delete(&state.db, *id, auth.id()).await?;
-    state.models.forget(model.id);
-    state.sync_search().await;
-    if let Some(lod) = &model.lod_path {
-        remove_model_file(&state.settings, lod).await;
-    }
+    state.delete_model(auth.id(), *id).await?;
     Ok(HttpResponse::NoContent().finish())
-}
-
-/// Removes a model's LOD file (or directory) if `relative` is a plain path inside
-/// `models/` of the data directory; anything else is left alone.
-pub async fn remove_model_file(settings: &Settings, relative: &str) {
-    let rel = Path::new(relative);
-    let plain = rel.components().all(|c| matches!(c, Component::Normal(_)));
-    if !plain || !rel.starts_with("models") || rel.components().count() < 2 {
-        tracing::warn!(path = relative, "not removing LOD path outside models/");
-        return;
-    }
-    let path = settings.data_dir.join(rel);
-    let result = match tokio::fs::metadata(&path).await {
-        Ok(m) if m.is_dir() => tokio::fs::remove_dir_all(&path).await,
-        Ok(_) => tokio::fs::remove_file(&path).await,
-        Err(_) => Ok(()),
-    };
-    if let Err(e) = result {
-        tracing::warn!(path = %path.display(), error = %e, "cannot remove LOD file");
-    }
 }

@@ -190,3 +190,124 @@ fn a_build_interrupted_by_a_crash_restarts() {
     no_leftovers(dir.path());
     assert_eq!(names(&models_dir), vec![format!("{model}.mwlod")]);
 }
+
+#[test]
+fn a_failed_or_cancelled_build_is_retried_with_a_new_scan_or_its_model_deleted() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let csrf = admin.csrf.clone().unwrap();
+    let scans = tempfile::tempdir().unwrap();
+    let good = std::fs::read(relief_ply(scans.path(), "r.ply", 4_000)).unwrap();
+
+    // A broken scan fails; the jobs page offers to retry it or delete its model.
+    let r = upload_scan(&admin, "Gate", "gate.ply", good[..good.len() / 2].to_vec());
+    assert_eq!(r.status, 202, "{}", r.text());
+    let (job, model) = (
+        r.json()["job"]["id"].as_i64().unwrap(),
+        r.json()["model"]["id"].as_i64().unwrap(),
+    );
+    assert_eq!(wait_finished(&admin, job, 60)["status"], "failed");
+    let page = admin.get("/admin/jobs").text();
+    assert!(
+        page.contains("Retry the build")
+            && page.contains(&format!("name=\"model\" value=\"{model}\""))
+    );
+    assert!(page.contains(&format!("action=\"/admin/models/{model}/delete\"")));
+
+    // Retried through the API with the whole scan: the same model, now ready.
+    let r = admin.request(
+        "POST",
+        &format!("/api/v1/models/upload?model={model}&filename=gate.ply"),
+        Some("application/octet-stream"),
+        good.clone(),
+        true,
+    );
+    assert_eq!(r.status, 202, "{}", r.text());
+    assert_eq!(r.json()["model"]["id"], model);
+    assert_eq!(r.json()["model"]["status"], "pending");
+    let retry = r.json()["job"]["id"].as_i64().unwrap();
+    assert_eq!(wait_finished(&admin, retry, 120)["status"], "done");
+    let m = admin.get(&format!("/api/v1/models/{model}")).json();
+    assert_eq!(
+        (m["status"].as_str(), m["title"].as_str()),
+        (Some("ready"), Some("Gate"))
+    );
+    assert!(m["error"].is_null());
+    assert_eq!(
+        admin.get(&format!("/api/v1/models/{model}/lod")).status,
+        200
+    );
+    // A ready model keeps its scan (its parts name that scan's vertices): 409, before the
+    // body is read, and nothing is left behind.
+    let r = admin.request(
+        "POST",
+        &format!("/api/v1/models/upload?model={model}&filename=gate.ply"),
+        Some("application/octet-stream"),
+        good.clone(),
+        true,
+    );
+    assert!(r.assert_error(409).contains("ready"));
+    assert!(!admin.get("/admin/jobs").text().contains("Retry the build"));
+
+    // A second failure, retried through the page's form; a refused upload keeps what was
+    // typed; the model deleted from the page.
+    let r = upload_scan(&admin, "Beam", "beam.ply", good[..100].to_vec());
+    let (job, model) = (
+        r.json()["job"]["id"].as_i64().unwrap(),
+        r.json()["model"]["id"].as_i64().unwrap(),
+    );
+    assert_eq!(wait_finished(&admin, job, 60)["status"], "failed");
+    let r = admin.upload(
+        "/admin/jobs/upload",
+        &[
+            ("csrf_token", &csrf),
+            ("title", "Roof beam"),
+            ("description", "kept *text*"),
+        ],
+        "beam.txt",
+        "text/plain",
+        b"not a scan",
+        false,
+    );
+    assert_eq!(r.status, 400, "{}", r.text());
+    let page = r.text();
+    assert!(
+        page.contains("value=\"Roof beam\"") && page.contains("kept *text*"),
+        "the form keeps what was typed"
+    );
+    let r = admin.upload(
+        "/admin/jobs/upload",
+        &[("csrf_token", &csrf), ("model", &model.to_string())],
+        "beam.ply",
+        "application/octet-stream",
+        &good,
+        false,
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    assert_eq!(
+        r.header("location"),
+        Some(format!("/models/{model}").as_str())
+    );
+    let jobs = admin.get("/api/v1/jobs?limit=1").json();
+    let latest = jobs[0]["id"].as_i64().unwrap();
+    assert_eq!(jobs[0]["model_id"], model);
+    assert_eq!(wait_finished(&admin, latest, 120)["status"], "done");
+    let r = admin.post_form(
+        &format!("/admin/models/{model}/delete"),
+        &[("csrf_token", &csrf)],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    assert_eq!(admin.get(&format!("/api/v1/models/{model}")).status, 404);
+    // An editor may do neither.
+    let editor = create_user(&server, &admin, "ed", "editor");
+    let r = editor.request(
+        "POST",
+        &format!("/api/v1/models/upload?model={model}&filename=gate.ply"),
+        Some("application/octet-stream"),
+        good[..10].to_vec(),
+        true,
+    );
+    assert_eq!(r.status, 403);
+    no_leftovers(dir.path());
+}

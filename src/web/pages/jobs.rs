@@ -9,10 +9,10 @@ use askama::Template;
 use futures_util::StreamExt;
 
 use super::{CsrfOnly, Layout, redirect, render_status};
-use crate::jobs::{ReceivedScan, SCAN_EXTENSIONS};
+use crate::jobs::{ReceivedScan, SCAN_EXTENSIONS, UploadTarget};
 use crate::store::Page;
-use crate::store::jobs::{self, Job};
-use crate::store::models::NewModel;
+use crate::store::jobs::{self, Job, JobStatus};
+use crate::store::models::{self, ModelStatus, NewModel};
 use crate::store::users::Role;
 use crate::web::auth::{PageAuth, PageForm};
 use crate::web::jobs::{check_title, extension_of, receive_scan};
@@ -23,8 +23,10 @@ use crate::web::{ApiError, AppState, PageError};
 pub fn configure(cfg: &mut web::ServiceConfig) {
     cfg.service(crate::web::resource("/admin/jobs").route(web::get().to(page)))
         .service(crate::web::resource("/admin/jobs/upload").route(web::post().to(page_upload)))
+        .service(crate::web::resource("/admin/jobs/{id}/cancel").route(web::post().to(page_cancel)))
         .service(
-            crate::web::resource("/admin/jobs/{id}/cancel").route(web::post().to(page_cancel)),
+            crate::web::resource("/admin/models/{id}/delete")
+                .route(web::post().to(page_delete_model)),
         );
 }
 
@@ -36,6 +38,9 @@ pub struct JobView {
     pub active: bool,
     /// `12.5` → `"12.5"`.
     pub percent: String,
+    /// The latest build of a model left without a built scan (failed or cancelled): the page
+    /// offers to upload the scan again or to delete the model.
+    pub retry: bool,
 }
 
 impl JobView {
@@ -44,6 +49,7 @@ impl JobView {
         JobView {
             active: !job.status.is_finished(),
             percent: format!("{:.1}", job.percent),
+            retry: false,
             job,
         }
     }
@@ -56,8 +62,18 @@ struct JobsPage {
     jobs: Vec<JobView>,
     any_active: bool,
     error: String,
+    /// The upload form's title and description, kept after an error.
+    title: String,
+    description: String,
     max_upload_mb: u64,
     extensions: &'static str,
+}
+
+/// The upload form's text, put back after an error.
+#[derive(Debug, Clone, Default)]
+struct Kept {
+    title: String,
+    description: String,
 }
 
 async fn jobs_page(
@@ -65,9 +81,26 @@ async fn jobs_page(
     auth: &PageAuth,
     status: StatusCode,
     error: String,
+    kept: Kept,
 ) -> Result<HttpResponse, PageError> {
     let list = jobs::list(&state.db, None, Page::new(Some(200), None)).await?;
-    let jobs: Vec<JobView> = list.into_iter().map(JobView::new).collect();
+    let mut jobs: Vec<JobView> = list.into_iter().map(JobView::new).collect();
+    // Newest first: the first job seen of a model is its latest.
+    let mut seen = std::collections::HashSet::new();
+    for view in &mut jobs {
+        let Some(model_id) = view.job.model_id else {
+            continue;
+        };
+        if !seen.insert(model_id)
+            || !matches!(view.job.status, JobStatus::Failed | JobStatus::Cancelled)
+        {
+            continue;
+        }
+        view.retry = matches!(
+            models::get(&state.db, model_id).await.map(|m| m.status),
+            Ok(ModelStatus::Pending | ModelStatus::Failed)
+        );
+    }
     render_status(
         status,
         &JobsPage {
@@ -75,6 +108,8 @@ async fn jobs_page(
             any_active: jobs.iter().any(|j| j.active),
             jobs,
             error,
+            title: kept.title,
+            description: kept.description,
             max_upload_mb: state.settings.build.upload_bytes >> 20,
             extensions: SCAN_EXTENSIONS,
         },
@@ -83,18 +118,57 @@ async fn jobs_page(
 
 async fn page(state: web::Data<AppState>, auth: PageAuth) -> Result<HttpResponse, PageError> {
     auth.require(Role::Admin)?;
-    jobs_page(&state, &auth, StatusCode::OK, String::new()).await
+    jobs_page(
+        &state,
+        &auth,
+        StatusCode::OK,
+        String::new(),
+        Kept::default(),
+    )
+    .await
 }
 
-/// Reads the upload form: text fields (`csrf_token` first, `title`, `description`) and one
-/// `file`, streamed to `uploads/`.
+/// The upload form as read.
+struct UploadForm {
+    scan: ReceivedScan,
+    title: String,
+    description: String,
+    /// An existing model to give the scan (a retry).
+    model: Option<i64>,
+}
+
+/// Reads the upload form: text fields (`csrf_token` first, `title`, `description`, or
+/// `model` for a retry) and one `file`, streamed to `uploads/`.
 async fn receive_form(
     state: &AppState,
     auth: &PageAuth,
-    mut form: Multipart,
-) -> Result<(ReceivedScan, String, String), ApiError> {
-    let limit = state.settings.build.upload_bytes;
+    form: Multipart,
+) -> Result<UploadForm, (ApiError, Kept)> {
     let mut fields = TextFields::new();
+    let read = read_form(state, auth, form, &mut fields).await;
+    let kept = Kept {
+        title: fields.remove("title").unwrap_or_default(),
+        description: fields.remove("description").unwrap_or_default(),
+    };
+    match read {
+        Ok((scan, model)) => Ok(UploadForm {
+            scan,
+            title: kept.title,
+            description: kept.description,
+            model,
+        }),
+        Err(e) => Err((e, kept)),
+    }
+}
+
+/// [`receive_form`]'s reading: the text fields into `fields`, the scan and the model id.
+async fn read_form(
+    state: &AppState,
+    auth: &PageAuth,
+    mut form: Multipart,
+    fields: &mut TextFields,
+) -> Result<(ReceivedScan, Option<i64>), ApiError> {
+    let limit = state.settings.build.upload_bytes;
     let mut scan = None;
     while let Some(field) = form.next().await {
         let mut field = field.map_err(multipart_error)?;
@@ -123,9 +197,14 @@ async fn receive_form(
         }
     }
     let scan = scan.ok_or_else(|| ApiError::bad("choose a scan file to upload"))?;
-    let title = fields.remove("title").unwrap_or_default();
-    let description = fields.remove("description").unwrap_or_default();
-    Ok((scan, title, description))
+    let model = match fields.get("model").map(str::trim).filter(|m| !m.is_empty()) {
+        Some(m) => Some(
+            m.parse::<i64>()
+                .map_err(|_| ApiError::bad(format!("{m:?} is not a model id")))?,
+        ),
+        None => None,
+    };
+    Ok((scan, model))
 }
 
 async fn page_upload(
@@ -136,29 +215,59 @@ async fn page_upload(
 ) -> Result<HttpResponse, PageError> {
     auth.require(Role::Admin)?;
     crate::web::auth::check_origin(&req)?;
-    let (scan, title, description) = match receive_form(&state, &auth, form).await {
+    let form = match receive_form(&state, &auth, form).await {
         Ok(r) => r,
-        Err(e @ ApiError::Forbidden(_)) => return Err(e.into()),
-        Err(e) => return jobs_page(&state, &auth, e.status_code(), e.message()).await,
-    };
-    let title = match check_title(&title, state.settings.limits.title_chars) {
-        Ok(t) => t,
-        Err(e) => {
-            drop(scan);
-            return jobs_page(&state, &auth, StatusCode::BAD_REQUEST, e.message()).await;
+        Err((e @ ApiError::Forbidden(_), _)) => return Err(e.into()),
+        Err((e, kept)) => {
+            return jobs_page(&state, &auth, e.status_code(), e.message(), kept).await;
         }
     };
-    let model = NewModel {
+    let UploadForm {
+        scan,
         title,
-        description: description.replace("\r\n", "\n"),
-        source_name: scan.display_name.clone(),
+        description,
+        model,
+    } = form;
+    // What the person typed comes back with an error, so a refused upload loses nothing.
+    let kept = Kept {
+        title: title.clone(),
+        description: description.clone(),
     };
-    let (model, _job) = state
-        .jobs
-        .submit_upload(scan, &model, auth.id())
-        .await
-        .map_err(ApiError::from)?;
-    Ok(redirect(&format!("/models/{}", model.id)))
+    let new;
+    let target = match model {
+        Some(id) => UploadTarget::Existing(id),
+        None => match check_title(&title, state.settings.limits.title_chars) {
+            Ok(title) => {
+                new = NewModel {
+                    title,
+                    description: description.replace("\r\n", "\n"),
+                    source_name: scan.display_name.clone(),
+                };
+                UploadTarget::New(&new)
+            }
+            Err(e) => {
+                drop(scan);
+                return jobs_page(&state, &auth, StatusCode::BAD_REQUEST, e.message(), kept).await;
+            }
+        },
+    };
+    match state.jobs.submit_upload(scan, target, auth.id()).await {
+        Ok((model, _job)) => Ok(redirect(&format!("/models/{}", model.id))),
+        Err(e) => {
+            let e = ApiError::from(e);
+            jobs_page(&state, &auth, e.status_code(), e.message(), kept).await
+        }
+    }
+}
+
+async fn page_delete_model(
+    state: web::Data<AppState>,
+    id: web::Path<i64>,
+    post: PageForm<CsrfOnly>,
+) -> Result<HttpResponse, PageError> {
+    post.auth.require(Role::Admin)?;
+    state.delete_model(post.auth.id(), *id).await?;
+    Ok(redirect("/admin/jobs"))
 }
 
 async fn page_cancel(
