@@ -357,6 +357,44 @@ pub struct ReceivedScan {
     pub extension: String,
     /// Display name (sanitised uploader's file name).
     pub display_name: String,
+    /// The files the scan refers to (a glTF's `.bin` and textures, an OBJ's MTL and images),
+    /// uploaded with it; empty for a single-file scan.
+    pub companions: Vec<Companion>,
+    /// The scan's path relative to the folder of its companions ([`companion_path`]; its
+    /// file name when uploaded alone).
+    pub relative: String,
+}
+
+/// A file uploaded with a scan, stored beside it under its relative path.
+#[derive(Debug)]
+pub struct Companion {
+    /// Relative path ([`companion_path`]).
+    pub relative: String,
+    /// The received bytes.
+    pub temp: crate::uploads::TempUpload,
+    /// Their length.
+    pub bytes: u64,
+}
+
+/// Most files uploaded with one scan.
+pub const MAX_SCAN_FILES: usize = 64;
+
+/// The relative path under which an uploaded file is stored beside its scan: the browser's
+/// relative path (a folder upload names `folder/file.bin`), each component a plain name
+/// (no `.`, `..`, empty, absolute or drive part, control character, or more than 200 bytes),
+/// at most 8 deep. `None` for anything else: a scan's references are resolved in its own
+/// folder only (see the importers), so no name can point elsewhere.
+pub fn companion_path(raw: &str) -> Option<String> {
+    let parts: Vec<&str> = raw.split(['/', '\\']).collect();
+    let plain = |c: &&str| {
+        !c.is_empty()
+            && *c != "."
+            && *c != ".."
+            && c.len() <= 200
+            && !c.contains(':')
+            && !c.chars().any(char::is_control)
+    };
+    (parts.len() <= 8 && parts.iter().all(plain)).then(|| parts.join("/"))
 }
 
 impl Jobs {
@@ -496,18 +534,58 @@ impl Jobs {
         target: UploadTarget<'_>,
         user_id: i64,
     ) -> Result<(Model, Job), JobError> {
-        let name = format!("src-{}.{}", crate::random_hex(12), scan.extension);
-        let rel = format!("uploads/{name}");
-        let dest = self.inner.settings.uploads_dir().join(&name);
-        let (temp, to) = (scan.temp, dest.clone());
-        tokio::task::spawn_blocking(move || temp.persist(&to))
+        let uploads = self.inner.settings.uploads_dir();
+        let display_name = scan.display_name.clone();
+        let bytes = scan.bytes + scan.companions.iter().map(|c| c.bytes).sum::<u64>();
+        let (rel, dest) = if scan.companions.is_empty() {
+            let name = format!("src-{}.{}", crate::random_hex(12), scan.extension);
+            let dest = uploads.join(&name);
+            let (temp, to) = (scan.temp, dest.clone());
+            tokio::task::spawn_blocking(move || temp.persist(&to))
+                .await
+                .map_err(|e| JobError::Invalid(e.to_string()))??;
+            (format!("uploads/{name}"), dest)
+        } else {
+            // The scan and its companions in a folder of their own, at their relative paths.
+            let name = format!("src-{}", crate::random_hex(12));
+            let dir = uploads.join(&name);
+            let main = scan.relative.clone();
+            let (to, files) = (dir.clone(), scan);
+            let placed = tokio::task::spawn_blocking(move || -> std::io::Result<()> {
+                std::fs::create_dir(&to)?;
+                let mut all = vec![(files.relative, files.temp)];
+                all.extend(files.companions.into_iter().map(|c| (c.relative, c.temp)));
+                for (relative, temp) in all {
+                    let dest = to.join(&relative);
+                    if let Some(parent) = dest.parent() {
+                        std::fs::create_dir_all(parent)?;
+                    }
+                    if dest.exists() {
+                        return Err(std::io::Error::new(
+                            std::io::ErrorKind::AlreadyExists,
+                            format!("{relative} is uploaded twice"),
+                        ));
+                    }
+                    temp.persist(&dest)?;
+                }
+                Ok(())
+            })
             .await
-            .map_err(|e| JobError::Invalid(e.to_string()))??;
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
+            if let Err(e) = placed {
+                let _ = tokio::fs::remove_dir_all(&dir).await;
+                return Err(match e.kind() {
+                    std::io::ErrorKind::AlreadyExists => JobError::Invalid(e.to_string()),
+                    _ => e.into(),
+                });
+            }
+            (format!("uploads/{name}/{main}"), dir)
+        };
         let new = NewJob {
             kind: JobKind::Upload,
             source_path: Some(rel),
-            source_name: scan.display_name.clone(),
-            source_bytes: scan.bytes.min(i64::MAX as u64) as i64,
+            source_name: display_name,
+            source_bytes: bytes.min(i64::MAX as u64) as i64,
             options: JobOptions::default(),
             running_pid: None,
         };
@@ -521,18 +599,13 @@ impl Jobs {
         };
         match created {
             Ok((model, job)) => {
-                tracing::info!(
-                    job = job.id,
-                    model = model.id,
-                    bytes = scan.bytes,
-                    "upload queued"
-                );
+                tracing::info!(job = job.id, model = model.id, bytes, "upload queued");
                 self.emit(&job);
                 self.wake();
                 Ok((model, job))
             }
             Err(e) => {
-                let _ = tokio::fs::remove_file(&dest).await;
+                remove_path(&dest).await;
                 Err(e.into())
             }
         }
@@ -641,12 +714,11 @@ impl Jobs {
         if !rel.starts_with("uploads") {
             return;
         }
-        let path = self.inner.settings.data_dir.join(rel);
-        match tokio::fs::remove_file(&path).await {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove upload"),
-        }
+        // `uploads/src-…` (one file) or `uploads/src-…/…` (a scan with its companions).
+        let Some(top) = rel.components().nth(1) else {
+            return;
+        };
+        remove_path(&self.inner.settings.uploads_dir().join(top)).await;
     }
 
     /// Runs a claimed (`running`) job to its end: build, thumbnail, final transaction.
@@ -885,6 +957,18 @@ impl Jobs {
     }
 }
 
+/// Removes a file or a folder; a missing one is fine.
+async fn remove_path(path: &Path) {
+    let result = match tokio::fs::metadata(path).await {
+        Ok(m) if m.is_dir() => tokio::fs::remove_dir_all(path).await,
+        Ok(_) => tokio::fs::remove_file(path).await,
+        Err(_) => Ok(()),
+    };
+    if let Err(e) = result {
+        tracing::warn!(path = %path.display(), error = %e, "cannot remove upload");
+    }
+}
+
 /// The pid at the end of a leftover's name (`.x.mwlod.build-<pid>`, `x.mwlod.tmp-<pid>`).
 fn leftover_pid(name: &str) -> Option<i64> {
     let (_, pid) = name
@@ -929,17 +1013,23 @@ fn cleanup_dirs(
     // inputs no job refers to.
     let uploads = settings.uploads_dir();
     removed.extend(crate::uploads::sweep(&uploads, &process_alive));
+    // A queued input is `uploads/src-…` or, with its companions, `uploads/src-…/…`.
     let keep: std::collections::HashSet<&str> = sources
         .iter()
         .filter_map(|s| s.strip_prefix("uploads/"))
+        .filter_map(|s| s.split('/').next())
         .collect();
     if let Ok(dir) = std::fs::read_dir(&uploads) {
         for entry in dir.flatten() {
             let name = entry.file_name().to_string_lossy().into_owned();
             let path = entry.path();
             let orphan = name.starts_with("src-") && !keep.contains(name.as_str());
-            if orphan && entry.file_type().is_ok_and(|t| t.is_file()) {
-                match std::fs::remove_file(&path) {
+            if orphan {
+                let removed_one = match entry.file_type() {
+                    Ok(t) if t.is_dir() => std::fs::remove_dir_all(&path),
+                    _ => std::fs::remove_file(&path),
+                };
+                match removed_one {
                     Ok(()) => removed.push(path),
                     Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove"),
                 }

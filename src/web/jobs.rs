@@ -62,7 +62,7 @@ pub async fn check_retry(state: &AppState, id: i64) -> Result<(), ApiError> {
     }
 }
 
-fn too_large(limit: u64) -> ApiError {
+pub(crate) fn too_large(limit: u64) -> ApiError {
     ApiError::PayloadTooLarge(format!(
         "model upload larger than the limit of {limit} bytes (--max-model-upload-mb)"
     ))
@@ -88,7 +88,9 @@ where
         temp: spooled.temp,
         bytes: spooled.bytes,
         extension,
+        relative: display_name.clone(),
         display_name,
+        companions: Vec::new(),
     })
 }
 

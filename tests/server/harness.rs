@@ -353,6 +353,44 @@ impl Client {
         )
     }
 
+    /// A multipart upload of several `file` fields `(filename, media type, bytes)` (text
+    /// fields sent first).
+    pub fn upload_files(
+        &self,
+        path: &str,
+        fields: &[(&str, &str)],
+        files: &[(&str, &str, &[u8])],
+    ) -> Resp {
+        let boundary = "----meshwikitestboundary7d93";
+        let mut body = Vec::new();
+        for (k, v) in fields {
+            body.extend_from_slice(
+                format!(
+                    "--{boundary}\r\nContent-Disposition: form-data; name=\"{k}\"\r\n\r\n{v}\r\n"
+                )
+                .as_bytes(),
+            );
+        }
+        for (filename, media_type, data) in files {
+            body.extend_from_slice(
+                format!(
+                    "--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"{filename}\"\r\nContent-Type: {media_type}\r\n\r\n"
+                )
+                .as_bytes(),
+            );
+            body.extend_from_slice(data);
+            body.extend_from_slice(b"\r\n");
+        }
+        body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
+        self.request(
+            "POST",
+            path,
+            Some(&format!("multipart/form-data; boundary={boundary}")),
+            body,
+            false,
+        )
+    }
+
     /// Logs in through the API, keeping the cookie and CSRF token.
     pub fn login(&mut self, user: &str, password: &str) -> Resp {
         let r = self.post(

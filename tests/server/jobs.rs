@@ -311,3 +311,135 @@ fn a_failed_or_cancelled_build_is_retried_with_a_new_scan_or_its_model_deleted()
     assert_eq!(r.status, 403);
     no_leftovers(dir.path());
 }
+
+/// A glTF grid of `n`×`n` vertices whose buffer is the separate file `bin_name`.
+fn gltf_with_bin(n: u32, bin_name: &str) -> (Vec<u8>, Vec<u8>) {
+    let mut bin = Vec::new();
+    for y in 0..n {
+        for x in 0..n {
+            let (u, v) = (x as f32 / (n - 1) as f32, y as f32 / (n - 1) as f32);
+            let z = 0.1 * (u * 9.0).sin() * (v * 7.0).cos();
+            for c in [u, v, z] {
+                bin.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
+    let positions = bin.len();
+    let mut triangles = 0;
+    for y in 0..n - 1 {
+        for x in 0..n - 1 {
+            let i = y * n + x;
+            for k in [i, i + 1, i + n + 1, i, i + n + 1, i + n] {
+                bin.extend_from_slice(&k.to_le_bytes());
+            }
+            triangles += 2;
+        }
+    }
+    let gltf = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"uri": bin_name, "byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": positions},
+            {"buffer": 0, "byteOffset": positions, "byteLength": bin.len() - positions}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": n * n, "type": "VEC3",
+             "min": [0.0, 0.0, -0.1], "max": [1.0, 1.0, 0.1]},
+            {"bufferView": 1, "componentType": 5125, "count": triangles * 3, "type": "SCALAR"}
+        ]
+    });
+    (serde_json::to_vec(&gltf).unwrap(), bin)
+}
+
+#[test]
+fn a_scan_uploads_with_the_files_it_refers_to() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let csrf = admin.csrf.clone().unwrap();
+    let (gltf, bin) = gltf_with_bin(40, "grid.bin");
+    let octet = "application/octet-stream";
+    let form = |title: &str, files: &[(&str, &str, &[u8])]| {
+        admin.upload_files(
+            "/admin/jobs/upload",
+            &[("csrf_token", &csrf), ("title", title)],
+            files,
+        )
+    };
+
+    // Refused at once, with a message: two scans, no scan, a name that climbs out.
+    let r = form("Two", &[("a.gltf", octet, &gltf), ("b.ply", octet, b"ply")]);
+    assert_eq!(r.status, 400);
+    assert!(r.text().contains("one scan at a time"));
+    let r = form("None", &[("grid.bin", octet, &bin)]);
+    assert!(r.status == 400 && r.text().contains("none of the files is a scan"));
+    let r = form(
+        "Climb",
+        &[("grid.gltf", octet, &gltf), ("../grid.bin", octet, &bin)],
+    );
+    assert!(
+        r.status == 400 && r.text().contains("not a plain file name"),
+        "{}",
+        r.text()
+    );
+    assert!(
+        names(&dir.path().join("uploads")).is_empty(),
+        "refused uploads leave nothing"
+    );
+
+    // Without its buffer, the build fails and names the missing file.
+    let r = form("Alone", &[("grid.gltf", "model/gltf+json", &gltf)]);
+    assert_eq!(r.status, 303, "{}", r.text());
+    let jobs = admin.get("/api/v1/jobs?limit=1").json();
+    let job = wait_finished(&admin, jobs[0]["id"].as_i64().unwrap(), 60);
+    assert_eq!(job["status"], "failed");
+    assert!(
+        job["message"]
+            .as_str()
+            .unwrap()
+            .contains("cannot find 'grid.bin'"),
+        "{job}"
+    );
+
+    // Picked together, or as their folder (the browser sends the folder in the names).
+    for (title, files) in [
+        ("Together", vec![("grid.gltf", &gltf), ("grid.bin", &bin)]),
+        (
+            "Folder",
+            vec![
+                ("scan/grid.bin", &bin),
+                ("scan/grid.gltf", &gltf),
+                ("scan/LICENSE.md", &b"CC BY".to_vec()),
+            ],
+        ),
+    ] {
+        let files: Vec<(&str, &str, &[u8])> = files
+            .iter()
+            .map(|(n, d)| (*n, octet, d.as_slice()))
+            .collect();
+        let r = form(title, &files);
+        assert_eq!(r.status, 303, "{title}: {}", r.text());
+        let model: i64 = r
+            .header("location")
+            .unwrap()
+            .trim_start_matches("/models/")
+            .parse()
+            .unwrap();
+        let jobs = admin.get("/api/v1/jobs?limit=1").json();
+        assert_eq!(jobs[0]["model_id"], model);
+        assert_eq!(jobs[0]["source_name"], "grid.gltf", "{title}");
+        let bytes: usize = files.iter().map(|f| f.2.len()).sum();
+        assert_eq!(jobs[0]["source_bytes"], bytes as i64);
+        let job = wait_finished(&admin, jobs[0]["id"].as_i64().unwrap(), 120);
+        assert_eq!(job["status"], "done", "{title}: {job}");
+        let m = admin.get(&format!("/api/v1/models/{model}")).json();
+        assert_eq!(
+            (m["status"].as_str(), m["vertex_count"].as_i64()),
+            (Some("ready"), Some(1600))
+        );
+    }
+    // The inputs (files and folders) are gone once built or failed.
+    no_leftovers(dir.path());
+}

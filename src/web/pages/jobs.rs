@@ -9,14 +9,17 @@ use askama::Template;
 use futures_util::StreamExt;
 
 use super::{CsrfOnly, Layout, redirect, render_status};
-use crate::jobs::{ReceivedScan, SCAN_EXTENSIONS, UploadTarget};
+use crate::jobs::{
+    Companion, MAX_SCAN_FILES, ReceivedScan, SCAN_EXTENSIONS, UploadTarget, companion_path,
+    scan_extension,
+};
 use crate::store::Page;
 use crate::store::jobs::{self, Job, JobStatus};
 use crate::store::models::{self, ModelStatus, NewModel};
 use crate::store::users::Role;
 use crate::web::auth::{PageAuth, PageForm};
-use crate::web::jobs::{check_title, extension_of, receive_scan};
-use crate::web::multipart::{TextFields, multipart_error};
+use crate::web::jobs::{check_title, extension_of};
+use crate::web::multipart::{Spooled, TextFields, multipart_error};
 use crate::web::{ApiError, AppState, PageError};
 
 /// Mounts the routes.
@@ -161,7 +164,9 @@ async fn receive_form(
     }
 }
 
-/// [`receive_form`]'s reading: the text fields into `fields`, the scan and the model id.
+/// [`receive_form`]'s reading: the text fields into `fields`, the files (one scan, and the
+/// files it refers to: a glTF's `.bin` and textures, an OBJ's MTL and images, picked together
+/// or as their folder) and the model id.
 async fn read_form(
     state: &AppState,
     auth: &PageAuth,
@@ -169,7 +174,10 @@ async fn read_form(
     fields: &mut TextFields,
 ) -> Result<(ReceivedScan, Option<i64>), ApiError> {
     let limit = state.settings.build.upload_bytes;
-    let mut scan = None;
+    let dir = state.settings.uploads_dir();
+    // (relative path, received bytes), in the order sent; the scan is picked at the end.
+    let mut files: Vec<(String, Spooled)> = Vec::new();
+    let mut total = 0u64;
     while let Some(field) = form.next().await {
         let mut field = field.map_err(multipart_error)?;
         let name = field.name().unwrap_or("").to_string();
@@ -178,9 +186,6 @@ async fn read_form(
             .and_then(|cd| cd.get_filename())
             .map(str::to_string);
         if name == "file" {
-            if scan.is_some() {
-                return Err(ApiError::bad("upload exactly one file"));
-            }
             let sent = fields.get("csrf_token").unwrap_or("");
             if !crate::web::auth::constant_time_eq(sent, auth.csrf()) {
                 return Err(ApiError::Forbidden(
@@ -188,15 +193,73 @@ async fn read_form(
                 ));
             }
             let filename = filename.unwrap_or_default();
-            let extension = extension_of(&filename)?;
-            let display = crate::web::attachments::sanitize_name(&filename);
+            if filename.is_empty() {
+                // An empty file input (e.g. the folder picker left unused).
+                while let Some(chunk) = field.next().await {
+                    chunk.map_err(multipart_error)?;
+                }
+                continue;
+            }
+            if files.len() == MAX_SCAN_FILES {
+                return Err(ApiError::bad(format!(
+                    "upload at most {MAX_SCAN_FILES} files: the scan and the files it refers to"
+                )));
+            }
+            let relative = companion_path(&filename).ok_or_else(|| {
+                ApiError::bad(format!(
+                    "{:?} is not a plain file name",
+                    crate::web::attachments::sanitize_name(&filename)
+                ))
+            })?;
             let stream = (&mut field).map(|c| c.map_err(multipart_error));
-            scan = Some(receive_scan(state, Box::pin(stream), extension, display, limit).await?);
+            let left = limit.saturating_sub(total);
+            let spooled = crate::web::multipart::spool(&dir, stream, left, false, || {
+                crate::web::jobs::too_large(limit)
+            })
+            .await?;
+            total += spooled.bytes;
+            files.push((relative, spooled));
         } else {
             fields.read(name, &mut field, 64 * 1024).await?;
         }
     }
-    let scan = scan.ok_or_else(|| ApiError::bad("choose a scan file to upload"))?;
+    let scans: Vec<usize> = (0..files.len())
+        .filter(|&i| scan_extension(&files[i].0).is_some())
+        .collect();
+    let main = match scans.as_slice() {
+        [i] => *i,
+        [] if files.is_empty() => return Err(ApiError::bad("choose a scan file to upload")),
+        [] => {
+            return Err(ApiError::bad(format!(
+                "none of the files is a scan: one must end in {SCAN_EXTENSIONS}"
+            )));
+        }
+        _ => {
+            return Err(ApiError::bad(
+                "upload one scan at a time (with the files it refers to)",
+            ));
+        }
+    };
+    let (relative, spooled) = files.remove(main);
+    if spooled.bytes == 0 {
+        return Err(ApiError::bad("the scan is empty"));
+    }
+    let extension = extension_of(&relative)?;
+    let scan = ReceivedScan {
+        temp: spooled.temp,
+        bytes: spooled.bytes,
+        extension,
+        display_name: crate::web::attachments::sanitize_name(&relative),
+        relative,
+        companions: files
+            .into_iter()
+            .map(|(relative, s)| Companion {
+                relative,
+                temp: s.temp,
+                bytes: s.bytes,
+            })
+            .collect(),
+    };
     let model = match fields.get("model").map(str::trim).filter(|m| !m.is_empty()) {
         Some(m) => Some(
             m.parse::<i64>()

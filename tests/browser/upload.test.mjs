@@ -1,0 +1,115 @@
+// Uploading a real scan through the web UI (issue 16, item 2): the Bali mask's glTF folder
+// (the .gltf, its .bin buffer and its texture image: three files) picked together on the jobs
+// page, sent with visible upload progress, built, and opened in the viewer. Without
+// ../shared/data a generated glTF with a separate buffer stands in.
+
+import { after, before, test } from 'node:test';
+import assert from 'node:assert/strict';
+import { existsSync, mkdtempSync, readdirSync, rmSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+
+import { SHARED_MESHES } from './support/env.mjs';
+import { ADMIN, startServer } from './support/server.mjs';
+import { launch, login, poll, waitViewer } from './support/browser.mjs';
+
+let server;
+let browser;
+let tmp;
+
+before(async () => {
+  tmp = mkdtempSync(join(tmpdir(), 'mw-upload-'));
+  server = await startServer();
+  browser = await launch();
+});
+
+after(async () => {
+  await browser?.close();
+  await server?.stop();
+  if (tmp) rmSync(tmp, { recursive: true, force: true });
+});
+
+/** A glTF grid whose buffer is the separate file grid.bin; returns the two paths. */
+function generatedGltf(dir, n = 120) {
+  const floats = new Float32Array(n * n * 3);
+  for (let y = 0; y < n; y++) {
+    for (let x = 0; x < n; x++) {
+      const [u, v] = [x / (n - 1), y / (n - 1)];
+      floats.set([u, v, 0.1 * Math.sin(u * 9) * Math.cos(v * 7)], (y * n + x) * 3);
+    }
+  }
+  const idx = [];
+  for (let y = 0; y < n - 1; y++) {
+    for (let x = 0; x < n - 1; x++) {
+      const i = y * n + x;
+      idx.push(i, i + 1, i + n + 1, i, i + n + 1, i + n);
+    }
+  }
+  const indices = new Uint32Array(idx);
+  const bin = Buffer.concat([Buffer.from(floats.buffer), Buffer.from(indices.buffer)]);
+  const gltf = {
+    asset: { version: '2.0' },
+    scene: 0, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0 }, indices: 1 }] }],
+    buffers: [{ uri: 'grid.bin', byteLength: bin.length }],
+    bufferViews: [
+      { buffer: 0, byteOffset: 0, byteLength: floats.byteLength },
+      { buffer: 0, byteOffset: floats.byteLength, byteLength: indices.byteLength },
+    ],
+    accessors: [
+      { bufferView: 0, componentType: 5126, count: n * n, type: 'VEC3', min: [0, 0, -0.1], max: [1, 1, 0.1] },
+      { bufferView: 1, componentType: 5125, count: indices.length, type: 'SCALAR' },
+    ],
+  };
+  writeFileSync(join(dir, 'grid.gltf'), JSON.stringify(gltf));
+  writeFileSync(join(dir, 'grid.bin'), bin);
+  return [join(dir, 'grid.gltf'), join(dir, 'grid.bin')];
+}
+
+function scanFiles() {
+  const bali = join(SHARED_MESHES, 'mask_bali_100k_textured_gltf');
+  if (existsSync(bali)) {
+    const files = readdirSync(bali).filter((f) => /\.(gltf|bin|jpg|png)$/i.test(f)).map((f) => join(bali, f));
+    return { files, name: 'the Bali mask', scan: /\.gltf$/ };
+  }
+  console.log('# ../shared/data is absent: a generated glTF with a separate buffer stands in for the Bali mask');
+  return { files: generatedGltf(tmp), name: 'a generated glTF', scan: /\.gltf$/ };
+}
+
+test('a glTF with its buffer and texture uploads through the page, with progress, and opens', { timeout: 600_000 }, async (t) => {
+  const { files, name } = scanFiles();
+  t.diagnostic(`${name}: ${files.length} files`);
+  const page = await browser.page();
+  // Record what the page shows while uploading (the page navigates away when done).
+  await page.addInitScript(() => {
+    const seen = () => {
+      const bar = document.querySelector('progress[data-upload-progress]');
+      const status = document.querySelector('[data-upload-status]');
+      if (bar && !bar.hidden && bar.value > Number(sessionStorage.getItem('mw-progress') || -1)) {
+        sessionStorage.setItem('mw-progress', String(bar.value));
+      }
+      if (status && status.textContent) sessionStorage.setItem('mw-status', status.textContent);
+    };
+    setInterval(seen, 5);
+    document.addEventListener('DOMContentLoaded', () => {
+      new MutationObserver(seen).observe(document.body, { subtree: true, childList: true, characterData: true, attributes: true });
+    });
+  });
+  await login(page, server.base, ADMIN);
+  await page.goto(`${server.base}/admin/jobs`);
+  await page.fill('input[name=title]', 'Uploaded mask');
+  await page.setInputFiles('#scan-files', files);
+  await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
+  const progress = await page.evaluate(() => ({ value: Number(sessionStorage.getItem('mw-progress')), status: sessionStorage.getItem('mw-status') }));
+  assert.equal(progress.value, 100, `the upload's progress reached 100 % (${JSON.stringify(progress)})`);
+  assert.match(progress.status || '', /Upload/, 'the progress was said in words');
+
+  const id = Number(new URL(page.url()).pathname.split('/').pop());
+  const model = await poll(page, async (mid) => (await fetch(`/api/v1/models/${mid}`)).json(), (m) => m.status === 'ready' || m.status === 'failed', 300_000, id);
+  assert.equal(model.status, 'ready', model.error);
+  const jobs = await server.api.get('/api/v1/jobs?limit=1');
+  assert.match(jobs[0].source_name, /\.gltf$/);
+  await page.goto(`${server.base}/models/${id}`);
+  const stats = await waitViewer(page, (s) => s.triangles > 0);
+  assert.ok(stats.triangles > 0, 'the viewer draws the uploaded scan');
+});
