@@ -74,7 +74,7 @@ async fn search(
     q: web::Query<SearchQuery>,
 ) -> Result<HttpResponse, ApiError> {
     let results = run(&state, &q).await?;
-    let hits = with_part_links(&state, results.hits).await?;
+    let hits = with_part_links(&state, results.hits, &q.q).await?;
     Ok(HttpResponse::Ok()
         .insert_header(("X-Total-Count", results.total.to_string()))
         .json(hits))
@@ -92,8 +92,9 @@ pub struct PartLink {
     pub model_title: String,
     /// Part kind.
     pub kind: String,
-    /// `/models/{model_id}?part={id}`: the page opening the viewer on the part's best view
-    /// (framed, highlighted, its information open).
+    /// `/models/{model_id}?part={id}&q={query}`: the page opening the viewer on the part's best
+    /// view (framed, highlighted, its information open with the query's words marked and the
+    /// matching paragraph in view); without `&q=` outside a search.
     pub url: String,
     /// The part's thumbnail (an attachment), once rendered.
     pub thumbnail_attachment_id: Option<i64>,
@@ -126,13 +127,24 @@ pub struct HitView {
     pub parts: Vec<PartLink>,
 }
 
-/// The best-view links of the parts content `content_id` is assigned to.
-pub async fn part_links(state: &AppState, content_id: i64) -> Result<Vec<PartLink>, ApiError> {
+/// The best-view links of the parts content `content_id` is assigned to; `query` (the search
+/// that found it, may be empty) travels in each link as `&q=`.
+pub async fn part_links(
+    state: &AppState,
+    content_id: i64,
+    query: &str,
+) -> Result<Vec<PartLink>, ApiError> {
+    let q = query.trim();
+    let q = if q.is_empty() {
+        String::new()
+    } else {
+        format!("&q={}", super::error::encode_component(q))
+    };
     Ok(assignments::parts_for_content(&state.db, content_id)
         .await?
         .into_iter()
         .map(|p| PartLink {
-            url: format!("/models/{}?part={}", p.model_id, p.id),
+            url: format!("/models/{}?part={}{q}", p.model_id, p.id),
             camera: p.camera(),
             image_url: p.camera().map(|c| view_image_url(p.model_id, p.id, &c)),
             thumbnail_attachment_id: p.thumbnail_attachment_id,
@@ -144,14 +156,15 @@ pub async fn part_links(state: &AppState, content_id: i64) -> Result<Vec<PartLin
         .collect())
 }
 
-/// Adds the part links to each hit.
+/// Adds the part links to each hit (`query`: the search that found them).
 pub async fn with_part_links(
     state: &AppState,
     hits: Vec<SearchHit>,
+    query: &str,
 ) -> Result<Vec<HitView>, ApiError> {
     let mut out = Vec::with_capacity(hits.len());
     for hit in hits {
-        let parts = part_links(state, hit.id).await?;
+        let parts = part_links(state, hit.id, query).await?;
         out.push(HitView { hit, parts });
     }
     Ok(out)

@@ -231,7 +231,10 @@ fn pages_work_without_javascript() {
     let view = editor.get(&format!("/contents/{id}")).text();
     assert!(view.contains("Theirs: carved dragons") && view.contains("Revision 4"));
     let history = editor.get(&format!("/contents/{id}/history")).text();
-    assert!(history.contains("back to the dragons"), "the revert's comment");
+    assert!(
+        history.contains("back to the dragons"),
+        "the revert's comment"
+    );
 
     // Upload an attachment from the edit page (CSRF field first), then see it listed.
     let r = editor.upload(
@@ -276,6 +279,46 @@ fn pages_work_without_javascript() {
     assert_eq!(r.status, 303, "{}", r.text());
     let model_page = editor.get(&model_url).text();
     assert!(model_page.contains(&format!("href=\"/contents/{id}\"")));
+    // The form takes a title too; a wrong number or an unknown title leads back to the part on
+    // the model page with a message, never to a bare 404.
+    let other = api_admin
+        .post(
+            "/api/v1/contents",
+            &json!({"title": "Lintel crack", "body": "A crack."}),
+        )
+        .json();
+    let r = editor.post_form(
+        &format!("/parts/{pid}/contents"),
+        &[("csrf_token", &csrf), ("content", "lintel CRACK")],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    assert!(
+        editor
+            .get(&model_url)
+            .text()
+            .contains(&format!("href=\"/contents/{}\"", other["id"]))
+    );
+    for (typed, code, says) in [
+        ("#987654", "missing", "There is no content"),
+        ("no such words", "none", "No content matches"),
+        (" ", "empty", "Type the title of a content"),
+    ] {
+        let r = editor.post_form(
+            &format!("/parts/{pid}/contents"),
+            &[("csrf_token", &csrf), ("content", typed)],
+        );
+        assert_eq!(r.status, 303, "{typed}: {}", r.text());
+        let to = r.header("location").unwrap_or_default().to_string();
+        assert!(
+            to.starts_with(&format!(
+                "{model_url}?assign_part={pid}&assign_error={code}"
+            )),
+            "{typed}: {to}"
+        );
+        let page = editor.get(&to);
+        assert_eq!(page.status, 200);
+        assert!(page.text().contains(says), "{typed}: {}", page.text());
+    }
     assert!(
         editor
             .get(&format!("/contents/{id}"))

@@ -1,17 +1,23 @@
 //! `/models` (list, admin create) and `/models/{id}` (model page: viewer placeholder, parts
-//! and the contents assigned to them, assignment forms for editors).
+//! and the contents assigned to them, assignment forms for editors). The assignment form takes
+//! a content's title (or `#id`); a script turns it into a search picker, and without it the
+//! server finds the content by title, or sends the editor back to the part with a message and
+//! the matching contents to pick from.
 
 use actix_web::{HttpResponse, web};
 use askama::Template;
 use serde::Deserialize;
 
 use super::{Layout, redirect, render};
+use crate::search::SearchHit;
 use crate::store::assignments::{self, AssignedContent};
 use crate::store::models::{self, Model, NewModel};
 use crate::store::parts::{self, Part};
 use crate::store::users::Role;
-use crate::store::{Page, contents};
+use crate::store::{Page, StoreError, contents};
 use crate::web::auth::{CsrfForm, PageAuth, PageForm};
+use crate::web::error::encode_component;
+use crate::web::search::{SearchQuery, run};
 use crate::web::{AppState, PageError};
 use crate::wiki::markdown;
 
@@ -124,6 +130,106 @@ struct ModelPage {
     viewer_data: String,
     /// The model's latest build job (progress while it runs).
     build_job: Option<super::jobs::JobView>,
+    /// What became of an assignment form that could not be carried out.
+    assign_notice: Option<AssignNotice>,
+}
+
+/// The model page's query: the outcome of an assignment form sent back to its part
+/// (`?assign_part=&assign_error=&assign_q=`); other parameters (the viewer's `part`, `q`) are
+/// the viewer's.
+#[derive(Debug, Default, Deserialize)]
+struct ShowQuery {
+    #[serde(default)]
+    assign_part: String,
+    #[serde(default)]
+    assign_error: String,
+    #[serde(default)]
+    assign_q: String,
+}
+
+/// Why an assignment form of the model page was sent back, shown by its part's form.
+struct AssignNotice {
+    part_id: i64,
+    message: String,
+    /// What the editor typed (the form keeps it).
+    query: String,
+    /// Contents matching it, to pick one (several matches, no exact title).
+    candidates: Vec<SearchHit>,
+}
+
+/// Longest text the assignment form searches for.
+const ASSIGN_QUERY_CHARS: usize = 200;
+/// Contents the assignment form offers when a title matches several.
+const ASSIGN_CANDIDATES: usize = 10;
+
+/// Contents matching the assignment form's text, best first.
+async fn assign_candidates(state: &AppState, text: &str) -> Result<Vec<SearchHit>, PageError> {
+    Ok(run(
+        state,
+        &SearchQuery {
+            q: text.to_string(),
+            model: None,
+            limit: Some(ASSIGN_CANDIDATES),
+            offset: None,
+        },
+    )
+    .await?
+    .hits)
+}
+
+impl AssignNotice {
+    /// The notice of the model page's query; `assigned(part)`: the contents part `part` already
+    /// shows (never offered again).
+    async fn from_query(
+        state: &AppState,
+        q: &ShowQuery,
+        assigned: impl Fn(i64) -> Vec<i64>,
+    ) -> Result<Option<Self>, PageError> {
+        let Ok(part_id) = q.assign_part.trim().parse::<i64>() else {
+            return Ok(None);
+        };
+        let query: String = q.assign_q.trim().chars().take(ASSIGN_QUERY_CHARS).collect();
+        let quoted = format!("\u{201c}{query}\u{201d}");
+        let mut candidates = Vec::new();
+        let message = match q.assign_error.as_str() {
+            "empty" => {
+                "Type the title of a content, or its number such as #12, to assign it.".into()
+            }
+            "missing" => format!(
+                "There is no content {quoted}. Type its title to find it, or check the number."
+            ),
+            "already" => format!("{quoted} is already assigned to this part."),
+            "choose" | "none" => {
+                let hits = if query.is_empty() {
+                    Vec::new()
+                } else {
+                    assign_candidates(state, &query).await?
+                };
+                let found = hits.len();
+                let skip = assigned(part_id);
+                candidates = hits.into_iter().filter(|h| !skip.contains(&h.id)).collect();
+                if found == 0 {
+                    format!(
+                        "No content matches {quoted}. Check the spelling, or create the content \
+                         first (Contents \u{203a} New content)."
+                    )
+                } else if candidates.is_empty() {
+                    format!("Every content matching {quoted} is already assigned to this part.")
+                } else if candidates.len() == 1 {
+                    format!("No content is titled {quoted}; did you mean this one?")
+                } else {
+                    format!("Several contents match {quoted}: pick one.")
+                }
+            }
+            _ => return Ok(None),
+        };
+        Ok(Some(AssignNotice {
+            part_id,
+            message,
+            query,
+            candidates,
+        }))
+    }
 }
 
 fn fmt3(v: &[f64; 3]) -> String {
@@ -134,6 +240,7 @@ async fn show(
     state: web::Data<AppState>,
     auth: PageAuth,
     id: web::Path<i64>,
+    query: web::Query<ShowQuery>,
 ) -> Result<HttpResponse, PageError> {
     let model = models::get(&state.db, *id).await?;
     let mut views = Vec::new();
@@ -154,6 +261,18 @@ async fn show(
         .map(super::jobs::JobView::new);
     let layout = Layout::new(&auth, model.title.clone());
     let can_edit = layout.can_edit();
+    let assign_notice = if can_edit {
+        AssignNotice::from_query(&state, &query, |part| {
+            views
+                .iter()
+                .filter(|v| v.part.id == part)
+                .flat_map(|v| v.contents.iter().map(|c| c.id))
+                .collect()
+        })
+        .await?
+    } else {
+        None
+    };
     let ready = model.status == models::ModelStatus::Ready;
     let viewer_message = if !crate::web::vendor::available() {
         "The 3D viewer is unavailable on this server: its front-end dependencies are not \
@@ -172,6 +291,7 @@ async fn show(
         )
     };
     render(&ModelPage {
+        assign_notice,
         build_job,
         can_edit,
         viewer_enabled: ready && crate::web::vendor::available(),
@@ -190,7 +310,13 @@ async fn show(
 struct AssignForm {
     #[serde(default)]
     csrf_token: String,
+    /// The content picked (the picker's choice, or a button of the list of matches); a number,
+    /// `#` allowed.
+    #[serde(default)]
     content_id: String,
+    /// What the editor typed: a content's title (or words of it), or its number (`#12`).
+    #[serde(default)]
+    content: String,
 }
 
 impl CsrfForm for AssignForm {
@@ -199,22 +325,98 @@ impl CsrfForm for AssignForm {
     }
 }
 
+/// A content number as typed: `12` or `#12`.
+fn content_number(text: &str) -> Option<i64> {
+    let t = text.trim();
+    let t = t.strip_prefix('#').unwrap_or(t).trim();
+    (!t.is_empty() && t.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| t.parse().ok())
+        .flatten()
+}
+
+/// The content an assignment form names, or the reason it names none (`assign_error`).
+enum Named {
+    Content(i64),
+    Refused(&'static str),
+}
+
+async fn named_content(state: &AppState, form: &AssignForm) -> Result<Named, PageError> {
+    let picked = form.content_id.trim();
+    let text = if picked.is_empty() {
+        form.content.trim()
+    } else {
+        picked
+    };
+    if text.is_empty() {
+        return Ok(Named::Refused("empty"));
+    }
+    let id = match content_number(text) {
+        Some(id) => id,
+        None if !picked.is_empty() => return Ok(Named::Refused("missing")),
+        None => {
+            // A title: the one content of exactly that title (letter case aside), else the
+            // matches to pick from.
+            let query: String = text.chars().take(ASSIGN_QUERY_CHARS).collect();
+            let hits = assign_candidates(state, &query).await?;
+            let wanted = query.to_lowercase();
+            let mut exact = hits
+                .iter()
+                .filter(|h| h.title.trim().to_lowercase() == wanted);
+            return Ok(match (exact.next(), exact.next()) {
+                (Some(h), None) => Named::Content(h.id),
+                _ if hits.is_empty() => Named::Refused("none"),
+                _ => Named::Refused("choose"),
+            });
+        }
+    };
+    match contents::get(&state.db, id).await {
+        Ok(_) => Ok(Named::Content(id)),
+        Err(StoreError::NotFound(_)) => Ok(Named::Refused("missing")),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Back to the part's form on the model page, saying why nothing was assigned.
+fn refused(part: &Part, code: &str, typed: &str) -> HttpResponse {
+    let typed: String = typed.trim().chars().take(ASSIGN_QUERY_CHARS).collect();
+    redirect(&format!(
+        "/models/{}?assign_part={}&assign_error={code}&assign_q={}#part-{}",
+        part.model_id,
+        part.id,
+        encode_component(&typed),
+        part.id
+    ))
+}
+
 async fn assign(
     state: web::Data<AppState>,
     part_id: web::Path<i64>,
     post: PageForm<AssignForm>,
 ) -> Result<HttpResponse, PageError> {
     post.auth.require(Role::Editor)?;
-    let content_id: i64 = post
-        .form
-        .content_id
-        .trim()
-        .trim_start_matches('#')
-        .parse()
-        .map_err(|_| crate::web::ApiError::bad("content id must be a number"))?;
-    contents::get(&state.db, content_id).await?;
     let part = parts::get(&state.db, *part_id).await?;
-    assignments::assign(&state.db, part.id, content_id, None, post.auth.id()).await?;
+    let form = &post.form;
+    let typed = if form.content_id.trim().is_empty() {
+        &form.content
+    } else {
+        &form.content_id
+    };
+    let content_id = match named_content(&state, form).await? {
+        Named::Content(id) => id,
+        Named::Refused(code) => return Ok(refused(&part, code, typed)),
+    };
+    match assignments::assign(&state.db, part.id, content_id, None, post.auth.id()).await {
+        Ok(()) => {}
+        Err(StoreError::Conflict(_)) => {
+            let title = contents::get(&state.db, content_id)
+                .await
+                .map(|c| c.title)
+                .unwrap_or_else(|_| format!("#{content_id}"));
+            return Ok(refused(&part, "already", &title));
+        }
+        Err(StoreError::Invalid(_)) => return Ok(refused(&part, "missing", typed)),
+        Err(e) => return Err(e.into()),
+    }
     state.sync_search().await;
     crate::web::assignments::publish_part_contents(&state, part.id).await;
     Ok(redirect(&format!(

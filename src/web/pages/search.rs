@@ -50,6 +50,7 @@ async fn search(
         },
     )
     .await?;
+    let hits = with_part_links(&state, results.hits, &q.q).await?;
     render(&SearchPage {
         layout: Layout::new(
             &auth,
@@ -65,7 +66,7 @@ async fn search(
         q: q.q,
         models,
         total: results.total,
-        hits: with_part_links(&state, results.hits).await?,
+        hits,
         searched,
         offset,
     })

@@ -1,6 +1,9 @@
 // The information browser (system paper §2.2): a side panel with the contents assigned to the
 // clicked part (rendered, sanitised Markdown from the server, attachments, edit and history
-// links), and the hover preview (title, caption, thumbnail).
+// links), and the hover preview (title, caption, thumbnail). Opened from a search result, the
+// panel marks the query's words (<mark>) and scrolls the first matching paragraph into view.
+
+import { markTerms, searchTerms } from './match.js';
 
 function el(tag, cls, text) {
   const e = document.createElement(tag);
@@ -32,9 +35,17 @@ export class InfoPanel {
     this.root.hidden = true;
     this.root.setAttribute('aria-live', 'polite');
     this.root.setAttribute('aria-label', 'Information about the selected part');
+    this.root.tabIndex = -1; // focusable (after the assign step), not a tab stop
     host.appendChild(this.root);
     this.partId = null;
     this.generation = 0;
+    this.highlight = null; // {partId, terms, scrolled}
+  }
+
+  /** Marks the words of search `query` when part `partId` is shown (null: no marking). */
+  setHighlight(partId, query) {
+    const terms = query ? searchTerms(query) : [];
+    this.highlight = partId !== null && terms.length ? { partId, terms, scrolled: false } : null;
   }
 
   isOpen() {
@@ -55,6 +66,7 @@ export class InfoPanel {
     this.root.replaceChildren();
     this.root.hidden = false;
     this.root.dataset.partId = String(id);
+    delete this.root.dataset.searchHit;
     const head = el('header', 'panel-head');
     const h = el('h2', null, store.title(id));
     const close = el('button', 'panel-close', '×');
@@ -82,6 +94,45 @@ export class InfoPanel {
     );
     if (generation !== this.generation) return;
     for (const c of bodies) this.root.append(this.article(c));
+    const hl = this.highlight;
+    if (hl && hl.partId === id) this.markMatches(hl);
+  }
+
+  /** Marks the search words in the contents; the first time, scrolls the paragraph with the most
+   * of them (the first such) into view. */
+  markMatches(h) {
+    const blocks = new Map(); // block -> distinct terms, in document order
+    for (const a of this.root.querySelectorAll('.panel-content')) {
+      for (const part of a.querySelectorAll(':scope > h3, :scope > .caption, :scope > .prose')) {
+        for (const { mark, term } of markTerms(part, h.terms)) {
+          const b = mark.closest('p, li, blockquote, pre, td, th, h1, h2, h3, h4, h5, h6, .caption') || mark.parentElement;
+          if (!blocks.has(b)) blocks.set(b, new Set());
+          blocks.get(b).add(term);
+        }
+      }
+    }
+    let block = null;
+    let best = 0;
+    for (const [b, terms] of blocks) {
+      // Body paragraphs before titles: the title is in view anyway.
+      const score = terms.size * 2 + (b.tagName === 'H3' ? 0 : 1);
+      if (score > best) {
+        best = score;
+        block = b;
+      }
+    }
+    if (!block) return;
+    block.classList.add('search-hit');
+    this.root.dataset.searchHit = 'true';
+    if (h.scrolled) return;
+    h.scrolled = true;
+    // Centre the paragraph in the panel (which scrolls on its own), then bring the panel's part of
+    // it into the page's view if needed (narrow screens, where the panel is below the view).
+    const panel = this.root.getBoundingClientRect();
+    const box = block.getBoundingClientRect();
+    const offset = box.top - panel.top + this.root.scrollTop;
+    this.root.scrollTop = Math.max(0, offset - Math.max(0, (this.root.clientHeight - box.height) / 2));
+    block.scrollIntoView({ block: 'nearest', inline: 'nearest' });
   }
 
   article(c) {

@@ -1,8 +1,10 @@
 // The "assign information" step after a region is confirmed: drop a file (image, PDF, text)
-// onto the region or the drop zone, give a link, or pick existing information found by the
-// search. A file is stored (`POST /api/v1/attachments`), a content made around it
-// (`POST /api/v1/contents`), the file attached to it (`PUT /api/v1/contents/{id}/attachments/
-// {attachment}`) and the content assigned to the part (`POST /api/v1/parts/{id}/contents`).
+// onto the region or the drop zone, give a link, write a note (Markdown), or pick existing
+// information found by the search. A file is stored (`POST /api/v1/attachments`), a content
+// made around it (`POST /api/v1/contents`), the file attached to it (`PUT /api/v1/contents/{id}/
+// attachments/{attachment}`) and the content assigned to the part (`POST /api/v1/parts/{id}/
+// contents`); a link or a note becomes a content of its own. The server's messages show in the
+// step.
 
 const TEXT_INLINE_BYTES = 64 * 1024;
 
@@ -31,6 +33,17 @@ function input(type, name, attrs = {}) {
 function mdLink(text, url) {
   const t = text.replace(/([\\[\]])/g, '\\$1');
   return `[${t}](<${url.replace(/[<>]/g, encodeURIComponent)}>)`;
+}
+
+/** A title from a note's first line: Markdown markers off, at most 80 characters. */
+export function noteTitle(body) {
+  const line = body.split('\n').map((l) => l.trim()).find((l) => l) || '';
+  const plain = line
+    .replace(/^(#{1,6}\s+|>\s*|[-*+]\s+|\d+[.)]\s+)+/, '')
+    .replace(/!?\[([^\]]*)\]\([^)]*\)/g, '$1')
+    .replace(/[*_`~]+/g, '')
+    .trim();
+  return plain.length > 80 ? `${plain.slice(0, 79).trimEnd()}…` : plain;
 }
 
 function isText(file) {
@@ -137,6 +150,26 @@ export class AssignStep {
       this.addLink(this.url.value.trim());
     });
 
+    const noteForm = el('form', 'assign-note');
+    this.note = document.createElement('textarea');
+    this.note.name = 'note';
+    this.note.rows = 5;
+    this.note.placeholder = 'What is this region? Markdown: **bold**, lists, links…';
+    const addNote = el('button', null, 'Add note');
+    addNote.type = 'submit';
+    noteForm.append(field('Write a note (Markdown) ', this.note), addNote);
+    noteForm.addEventListener('submit', (e) => {
+      e.preventDefault();
+      this.addNote(this.note.value);
+    });
+    // Ctrl+Enter (⌘+Enter) in the note saves it.
+    this.note.addEventListener('keydown', (e) => {
+      if (e.key === 'Enter' && (e.ctrlKey || e.metaKey)) {
+        e.preventDefault();
+        noteForm.requestSubmit();
+      }
+    });
+
     const searchForm = el('form', 'assign-search');
     searchForm.setAttribute('role', 'search');
     this.query = input('search', 'q', { placeholder: 'Search existing information…' });
@@ -152,8 +185,9 @@ export class AssignStep {
 
     this.message = el('p', 'assign-message');
     this.message.setAttribute('role', 'status');
+    this.message.setAttribute('aria-live', 'polite');
     this.assignedList = el('ul', 'assign-assigned');
-    this.root.append(head, details, drop, linkForm, searchForm, this.results, this.message, this.assignedList);
+    this.root.append(head, details, drop, linkForm, noteForm, searchForm, this.results, this.message, this.assignedList);
     this.title.focus();
   }
 
@@ -175,6 +209,16 @@ export class AssignStep {
   say(text, isError = false) {
     this.message.textContent = text;
     this.message.classList.toggle('error', isError);
+    // The step scrolls on its own: bring a message below its fold into view.
+    if (isError) this.message.scrollIntoView({ block: 'nearest' });
+  }
+
+  /** Whether Escape pressed on `target` should leave the step open: a field of the step that
+   * holds typed text (a note being written is not thrown away by a stray key). */
+  holdsText(target) {
+    if (!(target instanceof HTMLElement) || !this.root.contains(target)) return false;
+    const typed = target instanceof HTMLTextAreaElement || (target instanceof HTMLInputElement && target.type !== 'file');
+    return typed && target.value.trim() !== '';
   }
 
   titleFor(fallback) {
@@ -188,8 +232,17 @@ export class AssignStep {
     this.root.classList.add('busy');
     this.say(`${what}…`);
     try {
-      const content = await job();
-      await this.api.post(`/api/v1/parts/${this.partId}/contents`, { content_id: content.id });
+      let content;
+      try {
+        content = await job();
+      } catch (e) {
+        throw new Error(`${what} failed: ${e.message}`);
+      }
+      try {
+        await this.api.post(`/api/v1/parts/${this.partId}/contents`, { content_id: content.id });
+      } catch (e) {
+        throw new Error(`“${content.title}” (content #${content.id}) could not be assigned to part ${this.partId}: ${e.message}`);
+      }
       const li = el('li', null, content.title);
       li.dataset.contentId = String(content.id);
       this.assignedList.append(li);
@@ -247,6 +300,24 @@ export class AssignStep {
         body: `${mdLink(parsed.href, parsed.href)}\n`,
       });
       this.url.value = '';
+      return content;
+    });
+  }
+
+  addNote(text) {
+    const body = text.replace(/\r\n/g, '\n').trim();
+    if (!body) {
+      this.say('Write the note first: its text is empty.', true);
+      this.note.focus();
+      return;
+    }
+    return this.run('Saving the note', async () => {
+      const content = await this.api.post('/api/v1/contents', {
+        title: this.titleFor(noteTitle(body)),
+        caption: this.caption.value.trim(),
+        body: `${body}\n`,
+      });
+      this.note.value = '';
       return content;
     });
   }

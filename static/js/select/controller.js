@@ -3,7 +3,7 @@
 // exact highlight and the assign-information step together. A stroke becomes a label mask
 // of the current camera's size (capped to the server's limits, camera scaled alike) and a
 // draft; markup strokes accumulate on one view and refine one draft (Lazy Snapping); Escape
-// drops the stroke being drawn, else cancels.
+// drops the stroke being drawn, else ends the assign step, else cancels.
 
 import { Api, csrfToken } from './api.js';
 import { AssignStep } from './assign.js';
@@ -86,11 +86,23 @@ export class SelectController {
         host.assignDone(partId);
       },
     });
+    // Escape: drops the stroke being drawn, else ends the assign step (unless it is pressed in
+    // one of the step's fields holding typed text), else cancels the selection. A key used here
+    // is marked (preventDefault) so that the viewer does not also close its panel.
     this.onKey = (e) => {
-      if (e.key !== 'Escape') return;
-      if (this.layer.abort()) return;
-      if (this.assign.isOpen()) this.assign.close();
-      else if (this.tool !== null || this.session.stack.length || this.session.partId !== null) this.cancel();
+      if (e.key !== 'Escape' || e.defaultPrevented) return;
+      if (this.layer.abort()) {
+        e.preventDefault();
+        return;
+      }
+      if (this.assign.isOpen()) {
+        if (this.assign.holdsText(e.target)) return;
+        e.preventDefault();
+        this.assign.close();
+      } else if (this.tool !== null || this.session.stack.length || this.session.partId !== null) {
+        e.preventDefault();
+        this.cancel();
+      }
     };
     document.addEventListener('keydown', this.onKey);
     this.render();

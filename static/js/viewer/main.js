@@ -1,7 +1,8 @@
 // The 3D viewer of the model page (progressive enhancement of `<div id="viewer">`): streams
 // the model's patches view-dependently, draws them with three.js, shows the parts as callouts
-// and exact highlights, opens their information, lands on a linked part, follows live edits;
-// editors also get the region-selection tools (../select/).
+// and exact highlights, opens their information (Escape closes it), lands on a linked part (the
+// search that found it marked in its information), follows live edits; editors also get the
+// region-selection tools (../select/).
 
 import * as THREE from 'three';
 import { parseBinary, fromJson } from '../lod/table.js';
@@ -15,7 +16,7 @@ import { SceneView } from './scene.js';
 import { Navigation, framing } from './navigation.js';
 import { pick, firstHitDistance } from './picking.js';
 import { makeToolbar } from './toolbar.js';
-import { linkedPart, parseCamera, writePart } from './url.js';
+import { clearQuery, linkedPart, linkedQuery, parseCamera, writePart } from './url.js';
 import { SelectController } from '../select/controller.js';
 
 const CALLOUT_INTERVAL_MS = 120;
@@ -109,6 +110,7 @@ class Viewer {
     if (this.selection) this.toolbar.addGroup(this.selection.element);
     this.store.onChange(() => this.partsChanged());
     this.bindPointer();
+    this.bindKeys();
     new ResizeObserver(() => {
       this.layoutDirty = true;
       this.requestFrame();
@@ -141,7 +143,10 @@ class Viewer {
         this.select(part.id, false);
       },
       assignDone: (id) => {
-        if (this.store.parts.has(id)) this.select(id, true);
+        if (!this.store.parts.has(id)) return;
+        this.select(id, true);
+        // The panel takes the step's place, and the keyboard focus the step had.
+        this.panel.root.focus({ preventScroll: true });
       },
       contentsChanged: async (id) => {
         this.refreshPartList();
@@ -160,6 +165,7 @@ class Viewer {
     else if (part && this.store.parts.has(part)) this.nav.set(this.bestView(part));
     else this.nav.set(this.nav.home);
     if (part && this.store.parts.has(part)) {
+      this.panel.setHighlight(part, linkedQuery(window.location.search));
       this.select(part, true);
       if (!fromUrl) {
         // Once the part's vertices are known, frame it again from its real extent and normal.
@@ -364,9 +370,18 @@ class Viewer {
   select(id, open) {
     this.selected = id;
     this.root.dataset.selected = id === null ? '' : String(id);
+    if (this.panel.highlight && this.panel.highlight.partId !== id) {
+      // Another part (or none): the search that led here no longer applies.
+      this.panel.setHighlight(null, null);
+      clearQuery();
+    }
     writePart(id);
     if (id === null) this.panel.close();
-    else if (open) this.panel.open(id, this.store);
+    else if (open) {
+      // The panel shows what the hover card previewed.
+      this.preview.hide();
+      this.panel.open(id, this.store);
+    }
     if (this.selection) this.selection.setOpenPart(this.panel.partId);
     this.markAll();
     this.layoutDirty = true;
@@ -460,13 +475,35 @@ class Viewer {
         const { id } = this.partAt(q.x, q.y);
         this.setHover(id);
         const rect = this.stage.getBoundingClientRect();
-        if (id !== null) this.preview.show(id, this.store, q.x - rect.left, q.y - rect.top, rect.width);
+        // No hover card over the part whose information the panel already shows.
+        if (id !== null && !(this.panel.isOpen() && this.panel.partId === id)) this.preview.show(id, this.store, q.x - rect.left, q.y - rect.top, rect.width);
+        else this.preview.hide();
         this.requestFrame();
       });
     });
     canvas.addEventListener('pointerleave', () => {
       this.setHover(null);
       this.requestFrame();
+    });
+  }
+
+  /** Escape closes the information panel (after the selection tools had their say: they
+   * mark the keys they use with preventDefault); focus inside the panel returns to the part's
+   * callout, else to the view. Escape in a text field outside the panel stays the field's. */
+  bindKeys() {
+    document.addEventListener('keydown', (e) => {
+      if (e.key !== 'Escape' || e.defaultPrevented || !this.panel.isOpen()) return;
+      const t = e.target;
+      const inPanel = t instanceof Node && this.panel.root.contains(t);
+      if (!inPanel && t instanceof Element && t.closest('input, textarea, select, [contenteditable]')) return;
+      e.preventDefault();
+      const id = this.panel.partId;
+      const hadFocus = this.panel.root.contains(document.activeElement);
+      this.select(null, false);
+      if (hadFocus) {
+        const label = this.overlay.querySelector(`.callout[data-part-id="${id}"]`);
+        (label && !label.hidden ? label : this.view.canvas).focus();
+      }
     });
   }
 

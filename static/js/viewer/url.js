@@ -1,5 +1,6 @@
 // The camera in the page URL (`#camera=eye,target,up,fovy`, 10 numbers), so any view can be
-// shared as a link; `?part=ID` names the part a link lands on (search results, content pages).
+// shared as a link; `?part=ID` names the part a link lands on (search results, content pages),
+// `&q=…` the search that found it (its words are marked in the part's information).
 
 const DIGITS = 6;
 
@@ -40,5 +41,19 @@ export function writePart(id) {
   const url = new URL(window.location.href);
   if (id) url.searchParams.set('part', String(id));
   else url.searchParams.delete('part');
+  history.replaceState(history.state, '', url);
+}
+
+/** The search (`?q=`) a search result's link carries, or null. */
+export function linkedQuery(search) {
+  const q = new URLSearchParams(search).get('q');
+  return q && q.trim() ? q.trim().slice(0, 1000) : null;
+}
+
+/** Drops `?q=` once the search's part is left (no history entry). */
+export function clearQuery() {
+  const url = new URL(window.location.href);
+  if (!url.searchParams.has('q')) return;
+  url.searchParams.delete('q');
   history.replaceState(history.state, '', url);
 }
