@@ -255,18 +255,19 @@ impl SearchIndex {
         Ok(n)
     }
 
-    /// Searches `query` (tantivy query syntax, parsed leniently; words are ANDed), optionally
-    /// among contents assigned to model `model`. Blocking: call from a blocking context.
+    /// Searches `query` (tantivy query syntax, parsed leniently; words are ANDed), among the
+    /// contents assigned to one of `models` when given (an empty list finds nothing).
+    /// Blocking: call from a blocking context.
     pub fn search(
         &self,
         query: &str,
-        model: Option<i64>,
+        models: Option<&[i64]>,
         limit: usize,
         offset: usize,
     ) -> Result<SearchResults, SearchError> {
         let inner = &self.inner;
         let f = inner.fields;
-        if query.trim().is_empty() {
+        if query.trim().is_empty() || models.is_some_and(|m| m.is_empty()) {
             return Ok(SearchResults {
                 total: 0,
                 hits: Vec::new(),
@@ -281,17 +282,22 @@ impl SearchIndex {
         parser.set_field_boost(f.caption, 2.0);
         parser.set_field_boost(f.models, 1.5);
         let (text_query, _errors) = parser.parse_query_lenient(query);
-        let query: Box<dyn Query> = match model {
-            Some(m) => Box::new(BooleanQuery::new(vec![
-                (Occur::Must, text_query.box_clone()),
-                (
-                    Occur::Must,
-                    Box::new(TermQuery::new(
-                        Term::from_field_u64(f.model_id, m.max(0) as u64),
-                        IndexRecordOption::Basic,
-                    )),
-                ),
-            ])),
+        let query: Box<dyn Query> = match models {
+            Some(ms) => {
+                let any_model: Vec<(Occur, Box<dyn Query>)> = ms
+                    .iter()
+                    .map(|m| {
+                        let term = Term::from_field_u64(f.model_id, (*m).max(0) as u64);
+                        let q: Box<dyn Query> =
+                            Box::new(TermQuery::new(term, IndexRecordOption::Basic));
+                        (Occur::Should, q)
+                    })
+                    .collect();
+                Box::new(BooleanQuery::new(vec![
+                    (Occur::Must, text_query.box_clone()),
+                    (Occur::Must, Box::new(BooleanQuery::new(any_model))),
+                ]))
+            }
             None => text_query.box_clone(),
         };
         let searcher = inner.reader.searcher();

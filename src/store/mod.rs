@@ -17,6 +17,7 @@ pub mod part_revisions;
 pub mod parts;
 pub mod sessions;
 pub mod users;
+pub mod visibility;
 
 use std::borrow::Cow;
 use std::path::Path;
@@ -109,6 +110,11 @@ const MIGRATIONS: &[(i64, &str, &str)] = &[
         7,
         "part_revision_comments",
         include_str!("../../migrations/0007_part_revision_comments.sql"),
+    ),
+    (
+        8,
+        "public_models",
+        include_str!("../../migrations/0008_public_models.sql"),
     ),
 ];
 

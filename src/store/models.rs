@@ -69,6 +69,9 @@ pub struct Model {
     pub error: Option<String>,
     /// Thumbnail attachment.
     pub thumbnail_attachment_id: Option<i64>,
+    /// Anonymous visitors may view the model, search and read the information on its parts
+    /// (never edit). Set by admins.
+    pub public: bool,
     /// Creator.
     pub created_by: i64,
     /// Creation time.
@@ -81,7 +84,7 @@ pub struct Model {
 
 const COLUMNS: &str = "id, title, description, source_name, status, vertex_count, triangle_count, \
     bbox_min_x, bbox_min_y, bbox_min_z, bbox_max_x, bbox_max_y, bbox_max_z, lod_path, error, \
-    thumbnail_attachment_id, created_by, created_at, updated_at";
+    thumbnail_attachment_id, public, created_by, created_at, updated_at";
 
 fn from_row(r: &SqliteRow) -> std::result::Result<Model, sqlx::Error> {
     let corners: [Option<f64>; 6] = [
@@ -111,6 +114,7 @@ fn from_row(r: &SqliteRow) -> std::result::Result<Model, sqlx::Error> {
         lod_path: r.try_get("lod_path")?,
         error: r.try_get("error")?,
         thumbnail_attachment_id: r.try_get("thumbnail_attachment_id")?,
+        public: r.try_get("public")?,
         created_by: r.try_get("created_by")?,
         created_at: r.try_get("created_at")?,
         updated_at: r.try_get("updated_at")?,
@@ -202,8 +206,18 @@ pub async fn get(db: &Db, id: i64) -> Result<Model> {
 
 /// Models, newest first.
 pub async fn list(db: &Db, page: Page) -> Result<Vec<Model>> {
+    list_filtered(db, page, false).await
+}
+
+/// The public models, newest first (what anonymous visitors see).
+pub async fn list_public(db: &Db, page: Page) -> Result<Vec<Model>> {
+    list_filtered(db, page, true).await
+}
+
+async fn list_filtered(db: &Db, page: Page, public_only: bool) -> Result<Vec<Model>> {
+    let filter = if public_only { "WHERE public = 1" } else { "" };
     let rows = sqlx::query(sqlx::AssertSqlSafe(format!(
-        "SELECT {COLUMNS} FROM models ORDER BY id DESC LIMIT ? OFFSET ?"
+        "SELECT {COLUMNS} FROM models {filter} ORDER BY id DESC LIMIT ? OFFSET ?"
     )))
     .bind(page.limit)
     .bind(page.offset)
@@ -227,6 +241,9 @@ pub struct ModelPatch {
     #[serde(default, with = "double_option")]
     #[schema(value_type = Option<i64>)]
     pub thumbnail_attachment_id: Option<Option<i64>>,
+    /// Public read-only access for anonymous visitors (admins only).
+    #[serde(default)]
+    pub public: Option<bool>,
 }
 
 /// Serde helper telling an absent field (`None`) from an explicit `null` (`Some(None)`).
@@ -263,14 +280,18 @@ pub async fn update(db: &Db, id: i64, patch: &ModelPatch, user_id: i64) -> Resul
     if let Some(t) = patch.thumbnail_attachment_id {
         model.thumbnail_attachment_id = t;
     }
+    if let Some(p) = patch.public {
+        model.public = p;
+    }
     model.updated_at = crate::now_rfc3339();
     sqlx::query(
-        "UPDATE models SET title = ?, description = ?, thumbnail_attachment_id = ?, updated_at = ?
-         WHERE id = ?",
+        "UPDATE models SET title = ?, description = ?, thumbnail_attachment_id = ?, public = ?,
+         updated_at = ? WHERE id = ?",
     )
     .bind(&model.title)
     .bind(&model.description)
     .bind(model.thumbnail_attachment_id)
+    .bind(model.public)
     .bind(&model.updated_at)
     .bind(id)
     .execute(&mut *tx)
@@ -289,6 +310,7 @@ pub async fn update(db: &Db, id: i64, patch: &ModelPatch, user_id: i64) -> Resul
             "title": patch.title,
             "description_changed": patch.description.is_some(),
             "thumbnail_attachment_id": patch.thumbnail_attachment_id,
+            "public": patch.public,
         }),
     )
     .await?;

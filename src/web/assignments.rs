@@ -5,7 +5,7 @@ use actix_web::{HttpResponse, web};
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use super::auth::Auth;
+use super::auth::{Auth, Reader};
 use super::{ApiError, AppState};
 use crate::app::events::{Event, EventKind};
 use crate::store::assignments::{self, AssignedContent, AssignedPart};
@@ -55,12 +55,13 @@ pub struct ReorderRequest {
 #[utoipa::path(get, path = "/api/v1/parts/{id}/contents", tag = "assignments",
     params(("id" = i64, Path, description = "part id")),
     responses((status = 200, description = "Assigned contents", body = Vec<AssignedContent>)),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn list(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     part: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.part(&state.db, *part).await?;
     Ok(HttpResponse::Ok().json(assignments::contents_for_part(&state.db, *part).await?))
 }
 

@@ -13,7 +13,7 @@ use futures_util::StreamExt;
 use tokio::io::AsyncReadExt;
 use utoipa::ToSchema;
 
-use super::auth::Auth;
+use super::auth::{Auth, Reader};
 use super::multipart::{TextFields, multipart_error, spool};
 use super::{ApiError, AppState};
 use crate::store::attachments::{self, Attachment, NewAttachment};
@@ -254,12 +254,13 @@ async fn upload_to_content(
 #[utoipa::path(get, path = "/api/v1/attachments/{id}", tag = "attachments",
     params(("id" = i64, Path, description = "attachment id")),
     responses((status = 200, description = "The attachment", body = Attachment)),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.attachment(&state.db, *id).await?;
     Ok(HttpResponse::Ok().json(attachments::get(&state.db, *id).await?))
 }
 
@@ -351,12 +352,13 @@ pub async fn serve_file(state: &AppState, a: &Attachment) -> Result<HttpResponse
                 description = "`inline` or `attachment`, with the original file name"),
             ("ETag" = String, description = "The SHA-256 of the file, quoted"),
             ("X-Content-Type-Options" = String, description = "`nosniff`")))),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn download(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.attachment(&state.db, *id).await?;
     let a = attachments::get(&state.db, *id).await?;
     serve_file(&state, &a).await
 }

@@ -21,6 +21,7 @@ use super::AppState;
 use super::error::{ApiError, PageError};
 use crate::store::sessions::{self, Session};
 use crate::store::users::{self, Role, User};
+use crate::store::{Db, visibility};
 
 /// Name of the session cookie.
 pub const SESSION_COOKIE: &str = "meshwiki_session";
@@ -244,6 +245,119 @@ impl FromRequest for Auth {
                 }
             }
             Ok(Auth(session))
+        })
+    }
+}
+
+/// A read that anonymous visitors may make where the model is public
+/// ([`crate::store::visibility`]): the session when there is one (CSRF-checked like
+/// [`Auth`]), else `None`. Each handler asks for what it reads ([`Reader::model`], …): with a
+/// session everything is readable; without one only what hangs on a public model, else 401.
+#[derive(Debug, Clone)]
+pub struct Reader(pub Option<Auth>);
+
+impl Reader {
+    /// Whether the request has no session.
+    pub fn is_anonymous(&self) -> bool {
+        self.0.is_none()
+    }
+
+    /// 401 for an anonymous visitor unless `public` holds.
+    fn allow(&self, public: bool) -> Result<(), ApiError> {
+        if self.0.is_some() || public {
+            Ok(())
+        } else {
+            Err(ApiError::Unauthorized)
+        }
+    }
+
+    /// Model `id` may be read.
+    pub async fn model(&self, db: &Db, id: i64) -> Result<(), ApiError> {
+        match self.0 {
+            Some(_) => Ok(()),
+            None => self.allow(visibility::model(db, id).await?),
+        }
+    }
+
+    /// Part `id` may be read.
+    pub async fn part(&self, db: &Db, id: i64) -> Result<(), ApiError> {
+        match self.0 {
+            Some(_) => Ok(()),
+            None => self.allow(visibility::part(db, id).await?),
+        }
+    }
+
+    /// Content `id` may be read.
+    pub async fn content(&self, db: &Db, id: i64) -> Result<(), ApiError> {
+        match self.0 {
+            Some(_) => Ok(()),
+            None => self.allow(visibility::content(db, id).await?),
+        }
+    }
+
+    /// Attachment `id` may be read.
+    pub async fn attachment(&self, db: &Db, id: i64) -> Result<(), ApiError> {
+        match self.0 {
+            Some(_) => Ok(()),
+            None => self.allow(visibility::attachment(db, id).await?),
+        }
+    }
+}
+
+impl FromRequest for Reader {
+    type Error = ApiError;
+    type Future = Pin<Box<dyn Future<Output = Result<Reader, ApiError>>>>;
+
+    fn from_request(req: &HttpRequest, payload: &mut Payload) -> Self::Future {
+        let auth = Auth::from_request(req, payload);
+        Box::pin(async move {
+            match auth.await {
+                Ok(a) => Ok(Reader(Some(a))),
+                Err(ApiError::Unauthorized) => Ok(Reader(None)),
+                Err(e) => Err(e),
+            }
+        })
+    }
+}
+
+/// A page that anonymous visitors may open where the model is public: the session when there
+/// is one; without one, handlers check what they show and send the visitor to `/login`
+/// otherwise ([`PageReader::login`]).
+#[derive(Debug, Clone)]
+pub struct PageReader {
+    /// The session, if any.
+    pub auth: Option<PageAuth>,
+    next: String,
+}
+
+impl PageReader {
+    /// The redirect to the login page (back to this page afterwards).
+    pub fn login(&self) -> PageError {
+        PageError::Login(self.next.clone())
+    }
+
+    /// Unless there is a session or `public` holds, the redirect to the login page.
+    pub fn allow(&self, public: bool) -> Result<(), PageError> {
+        if self.auth.is_some() || public {
+            Ok(())
+        } else {
+            Err(self.login())
+        }
+    }
+}
+
+impl FromRequest for PageReader {
+    type Error = PageError;
+    type Future = Pin<Box<dyn Future<Output = Result<PageReader, PageError>>>>;
+
+    fn from_request(req: &HttpRequest, _: &mut Payload) -> Self::Future {
+        let req = req.clone();
+        Box::pin(async move {
+            let auth = current_session(&req).await?.map(PageAuth);
+            Ok(PageReader {
+                auth,
+                next: next_of(&req),
+            })
         })
     }
 }

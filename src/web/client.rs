@@ -3,7 +3,7 @@
 
 use actix_web::{HttpResponse, web};
 
-use super::auth::Auth;
+use super::auth::Reader;
 use super::{ApiError, AppState};
 use crate::app::client::ClientConfig;
 
@@ -23,7 +23,7 @@ pub(super) struct Api;
 /// how long draft selections are kept.
 #[utoipa::path(get, path = "/api/v1/config", tag = "meta",
     responses((status = 200, description = "The limits", body = ClientConfig)),
-    security(("sessionCookie" = ["viewer"])))]
-async fn get(state: web::Data<AppState>, _auth: Auth) -> Result<HttpResponse, ApiError> {
+    security((), ("sessionCookie" = ["viewer"])))]
+async fn get(state: web::Data<AppState>, _reader: Reader) -> Result<HttpResponse, ApiError> {
     Ok(HttpResponse::Ok().json(state.client_config()))
 }

@@ -6,7 +6,7 @@ use actix_web::{HttpResponse, web};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use super::auth::Auth;
+use super::auth::{Auth, Reader};
 use super::{ApiError, AppState, PageQuery};
 use crate::app::contents::OnStale;
 use crate::app::events::{Event, EventKind};
@@ -171,12 +171,13 @@ async fn create(
 #[utoipa::path(get, path = "/api/v1/contents/{id}", tag = "contents",
     params(("id" = i64, Path, description = "content id")),
     responses((status = 200, description = "The content", body = ContentView)),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.content(&state.db, *id).await?;
     let content = contents::get(&state.db, *id).await?;
     let att = attachments::list_for_content(&state.db, *id).await?;
     Ok(HttpResponse::Ok().json(ContentView::new(content, Some(att))))

@@ -11,7 +11,7 @@ use actix_web::{HttpResponse, http::header, web};
 use futures_util::stream;
 use tokio::sync::broadcast;
 
-use super::auth::Auth;
+use super::auth::Reader;
 use super::{ApiError, AppState};
 use crate::app::events::Event;
 use crate::store::models;
@@ -95,12 +95,13 @@ async fn next_chunk(
         description = "Event stream: `hello`, then `change` messages with a ChangeEvent as \
             data, `resync` and keep-alive comments",
         body = String, content_type = "text/event-stream")),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn events(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     model_id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *model_id).await?;
     let model = models::get(&state.db, *model_id).await?;
     let mut keep_alive = tokio::time::interval(KEEP_ALIVE);
     keep_alive.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);

@@ -16,7 +16,7 @@ use meshwiki_engine::lod::{FormatError, LodFile, NO_GROUP};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use super::auth::Auth;
+use super::auth::Reader;
 use super::{ApiError, AppState};
 use crate::app::models::{OpenModel, Purpose};
 
@@ -436,14 +436,15 @@ pub struct FormatQuery {
             body = super::openapi::ErrorBody,
             headers(("Content-Range" = String, description = "bytes */length"))),
     ),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn hierarchy(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     req: HttpRequest,
     id: web::Path<i64>,
     q: web::Query<FormatQuery>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *id).await?;
     let binary = match q.format.as_deref().map(str::trim) {
         None | Some("") | Some("json") => false,
         Some("binary") => true,
@@ -519,13 +520,14 @@ async fn hierarchy(
             body = super::openapi::ErrorBody,
             headers(("Content-Range" = String, description = "bytes */length"))),
     ),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn patch(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     req: HttpRequest,
     path: web::Path<(i64, u32)>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, path.0).await?;
     let (id, node) = path.into_inner();
     let open = state.models.open(&state.db, id, Purpose::Serve).await?;
     let count = open.lod.header().node_count;
@@ -574,13 +576,14 @@ async fn patch(
             body = super::openapi::ErrorBody,
             headers(("Content-Range" = String, description = "bytes */length"))),
     ),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn file(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     req: HttpRequest,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *id).await?;
     let open = state.models.open(&state.db, *id, Purpose::Serve).await?;
     let end = open.lod.bytes().len();
     let etag = open.etag.clone();

@@ -3,7 +3,7 @@
 
 use actix_web::{HttpResponse, web};
 
-use super::auth::Auth;
+use super::auth::{Auth, Reader};
 use super::{ApiError, AppState, PageQuery};
 use crate::store::models::{self, Model, ModelPatch, NewModel};
 use crate::store::users::Role;
@@ -34,13 +34,19 @@ pub(super) struct Api;
 #[utoipa::path(get, path = "/api/v1/models", tag = "models",
     params(super::PageQuery),
     responses((status = 200, description = "Models, newest first", body = Vec<Model>)),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn list(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     q: web::Query<PageQuery>,
 ) -> Result<HttpResponse, ApiError> {
-    Ok(HttpResponse::Ok().json(models::list(&state.db, q.page()).await?))
+    // Anonymous visitors see the public models only.
+    let list = if reader.is_anonymous() {
+        models::list_public(&state.db, q.page()).await?
+    } else {
+        models::list(&state.db, q.page()).await?
+    };
+    Ok(HttpResponse::Ok().json(list))
 }
 
 /// Create an empty model record
@@ -65,12 +71,13 @@ async fn create(
 #[utoipa::path(get, path = "/api/v1/models/{id}", tag = "models",
     params(("id" = i64, Path, description = "model id")),
     responses((status = 200, description = "The model", body = Model)),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *id).await?;
     Ok(HttpResponse::Ok().json(models::get(&state.db, *id).await?))
 }
 
@@ -89,6 +96,10 @@ async fn update(
     body: web::Json<ModelPatch>,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Editor)?;
+    if body.public.is_some() {
+        // Opening a model to anonymous visitors is an admin's decision.
+        auth.require(Role::Admin)?;
+    }
     let model = models::update(&state.db, *id, &body, auth.id()).await?;
     state.sync_search().await;
     Ok(HttpResponse::Ok().json(model))

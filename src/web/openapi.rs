@@ -148,7 +148,17 @@ pub fn conventions(doc: &mut Value) {
                 .and_then(|scopes| scopes.get(0))
                 .and_then(Value::as_str)
                 .map(str::to_string);
+            // `security((), ("sessionCookie" = ["viewer"]))`: anonymous visitors may make this
+            // read where the model is public (`store::visibility`).
+            let anonymous_too = role.is_some()
+                && op["security"].as_array().is_some_and(|reqs| {
+                    reqs.iter()
+                        .any(|r| r.as_object().is_some_and(|o| o.is_empty()))
+                });
             let note = match &role {
+                Some(role) if anonymous_too => format!(
+                    "Requires the `{role}` role or higher, or none when the model it concerns is public (anonymous visitors read public models)."
+                ),
                 Some(role) => format!("Requires the `{role}` role or higher."),
                 None => "Public.".to_string(),
             };
@@ -162,7 +172,11 @@ pub fn conventions(doc: &mut Value) {
                 if WRITES.contains(&method) {
                     req["csrfToken"] = json!([]);
                 }
-                op["security"] = json!([req]);
+                op["security"] = if anonymous_too {
+                    json!([req, {}])
+                } else {
+                    json!([req])
+                };
             } else {
                 op["security"] = json!([]);
             }

@@ -3,7 +3,7 @@
 
 use actix_web::{HttpResponse, http::header, web};
 
-use super::auth::Auth;
+use super::auth::{Auth, Reader};
 use super::{ApiError, AppState};
 use crate::store::models;
 use crate::store::parts::{self, NewPart, Part, PartPatch};
@@ -34,12 +34,13 @@ pub(super) struct Api;
 #[utoipa::path(get, path = "/api/v1/models/{id}/parts", tag = "parts",
     params(("id" = i64, Path, description = "model id")),
     responses((status = 200, description = "The model's parts", body = Vec<Part>)),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn list(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     model_id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *model_id).await?;
     models::get(&state.db, *model_id).await?;
     Ok(HttpResponse::Ok().json(parts::list_for_model(&state.db, *model_id).await?))
 }
@@ -68,12 +69,13 @@ async fn create(
 #[utoipa::path(get, path = "/api/v1/parts/{id}", tag = "parts",
     params(("id" = i64, Path, description = "part id")),
     responses((status = 200, description = "The part", body = Part)),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn get(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.part(&state.db, *id).await?;
     Ok(HttpResponse::Ok().json(parts::get(&state.db, *id).await?))
 }
 
@@ -121,12 +123,13 @@ async fn delete(
     params(("id" = i64, Path, description = "part id")),
     responses((status = 200, description = "The vertex set", body = super::openapi::Binary,
         content_type = "application/octet-stream")),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn vertices(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.part(&state.db, *id).await?;
     let bytes = parts::vertices(&state.db, *id).await?;
     Ok(HttpResponse::Ok()
         .insert_header((header::CONTENT_TYPE, "application/octet-stream"))

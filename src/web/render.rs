@@ -53,7 +53,7 @@ use serde_json::json;
 use utoipa::openapi::path::{Parameter, ParameterIn};
 use utoipa::{IntoParams, ToSchema};
 
-use super::auth::Auth;
+use super::auth::Reader;
 use super::{ApiError, AppState};
 use crate::app::models::Purpose;
 use crate::app::selections::ViewCamera;
@@ -683,13 +683,14 @@ fn stats_headers(resp: &mut actix_web::HttpResponseBuilder, stats: &RenderStats)
             body = super::openapi::ErrorBody,
             headers(("Retry-After" = u32, description = "seconds; absent when rendering is unavailable"))),
     ),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn image(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     model_id: web::Path<i64>,
     q: web::Query<RenderQuery>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *model_id).await?;
     let model_id = *model_id;
     let p = prepare(&state, model_id, &q, Route::Image).await?;
     let (w, h) = (p.params.width, p.params.height);
@@ -770,13 +771,14 @@ async fn image(
             body = super::openapi::ErrorBody,
             headers(("Retry-After" = u32, description = "seconds; absent when rendering is unavailable"))),
     ),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn buffers(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     model_id: web::Path<i64>,
     q: web::Query<RenderQuery>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *model_id).await?;
     let p = prepare(&state, *model_id, &q, Route::Buffers).await?;
     let (w, h) = (p.params.width, p.params.height);
     let o = p.params.outputs;
@@ -921,13 +923,14 @@ fn bytemuck_bytes_u8(px: &[[u8; 4]]) -> &[u8] {
             body = super::openapi::ErrorBody,
             headers(("Retry-After" = u32, description = "seconds; absent when rendering is unavailable"))),
     ),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn callouts_json(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     model_id: web::Path<i64>,
     q: web::Query<RenderQuery>,
 ) -> Result<HttpResponse, ApiError> {
+    reader.model(&state.db, *model_id).await?;
     let model_id = *model_id;
     let p = prepare(&state, model_id, &q, Route::Callouts).await?;
     let (w, h) = (p.params.width, p.params.height);

@@ -5,10 +5,11 @@ use actix_web::{HttpResponse, web};
 use serde::Deserialize;
 use utoipa::{IntoParams, ToSchema};
 
-use super::auth::Auth;
+use super::auth::Reader;
 use super::{ApiError, AppState};
 use crate::search::{SearchHit, SearchResults};
 use crate::store::assignments;
+use crate::store::visibility;
 
 /// Mounts the route.
 pub fn configure(cfg: &mut web::ServiceConfig) {
@@ -37,20 +38,40 @@ pub struct SearchQuery {
     pub offset: Option<usize>,
 }
 
-/// Runs a search on a blocking thread.
-pub async fn run(state: &AppState, q: &SearchQuery) -> Result<SearchResults, ApiError> {
+/// The models a search may look in: all (`None`) with a session; without one the public
+/// models only (and a model filter naming another is 401).
+pub async fn searchable(
+    state: &AppState,
+    anonymous: bool,
+    model: Option<i64>,
+) -> Result<Option<Vec<i64>>, ApiError> {
+    if !anonymous {
+        return Ok(model.map(|m| vec![m]));
+    }
+    match model {
+        Some(m) if visibility::model(&state.db, m).await? => Ok(Some(vec![m])),
+        Some(_) => Err(ApiError::Unauthorized),
+        None => Ok(Some(visibility::public_models(&state.db).await?)),
+    }
+}
+
+/// Runs a search on a blocking thread, among `models` (see [`searchable`]).
+pub async fn run(
+    state: &AppState,
+    q: &SearchQuery,
+    models: Option<Vec<i64>>,
+) -> Result<SearchResults, ApiError> {
     if q.q.len() > 1000 {
         return Err(ApiError::bad("query longer than 1000 bytes"));
     }
     let search = state.search.clone();
     let text = q.q.clone();
-    let (model, limit, offset) = (
-        q.model,
+    let (limit, offset) = (
         q.limit.unwrap_or(20).clamp(1, 100),
         q.offset.unwrap_or(0).min(10_000),
     );
     Ok(
-        tokio::task::spawn_blocking(move || search.search(&text, model, limit, offset))
+        tokio::task::spawn_blocking(move || search.search(&text, models.as_deref(), limit, offset))
             .await
             .map_err(ApiError::internal)??,
     )
@@ -67,14 +88,21 @@ pub async fn run(state: &AppState, q: &SearchQuery) -> Result<SearchResults, Api
     responses((status = 200, description = "Hits, best first", body = Vec<HitView>,
         headers(("X-Total-Count" = usize,
             description = "Number of matching contents, all pages together")))),
-    security(("sessionCookie" = ["viewer"])))]
+    security((), ("sessionCookie" = ["viewer"])))]
 async fn search(
     state: web::Data<AppState>,
-    _auth: Auth,
+    reader: Reader,
     q: web::Query<SearchQuery>,
 ) -> Result<HttpResponse, ApiError> {
-    let results = run(&state, &q).await?;
-    let hits = with_part_links(&state, results.hits, &q.q).await?;
+    let models = searchable(&state, reader.is_anonymous(), q.model).await?;
+    let results = run(&state, &q, models.clone()).await?;
+    // Anonymous visitors see the parts of public models only.
+    let shown = if reader.is_anonymous() {
+        models.as_deref()
+    } else {
+        None
+    };
+    let hits = with_part_links(&state, results.hits, &q.q, shown).await?;
     Ok(HttpResponse::Ok()
         .insert_header(("X-Total-Count", results.total.to_string()))
         .json(hits))
@@ -133,6 +161,7 @@ pub async fn part_links(
     state: &AppState,
     content_id: i64,
     query: &str,
+    models: Option<&[i64]>,
 ) -> Result<Vec<PartLink>, ApiError> {
     let q = query.trim();
     let q = if q.is_empty() {
@@ -143,6 +172,7 @@ pub async fn part_links(
     Ok(assignments::parts_for_content(&state.db, content_id)
         .await?
         .into_iter()
+        .filter(|p| models.is_none_or(|ms| ms.contains(&p.model_id)))
         .map(|p| PartLink {
             url: format!("/models/{}?part={}{q}", p.model_id, p.id),
             camera: p.camera(),
@@ -156,15 +186,17 @@ pub async fn part_links(
         .collect())
 }
 
-/// Adds the part links to each hit (`query`: the search that found them).
+/// Adds the part links to each hit (`query`: the search that found them; `models`: the
+/// models whose parts may be shown, all when `None`).
 pub async fn with_part_links(
     state: &AppState,
     hits: Vec<SearchHit>,
     query: &str,
+    models: Option<&[i64]>,
 ) -> Result<Vec<HitView>, ApiError> {
     let mut out = Vec::with_capacity(hits.len());
     for hit in hits {
-        let parts = part_links(state, hit.id, query).await?;
+        let parts = part_links(state, hit.id, query, models).await?;
         out.push(HitView { hit, parts });
     }
     Ok(out)

@@ -14,6 +14,7 @@ mod lod;
 mod merge;
 mod openapi;
 mod pages;
+mod public;
 mod render;
 mod security;
 mod selection;

@@ -16,7 +16,7 @@ use crate::store::assignments::{self, AssignedPart};
 use crate::store::attachments::{self, Attachment};
 use crate::store::contents::{self, Content, ContentEdit, Revision, RevisionSummary};
 use crate::store::users::Role;
-use crate::web::auth::{CsrfForm, PageAuth, PageForm};
+use crate::web::auth::{CsrfForm, PageAuth, PageForm, PageReader};
 use crate::web::contents::{DiffQuery, RevisionDiff, diff_of};
 use crate::web::{AppState, PageError};
 use crate::wiki::{diff, markdown};
@@ -107,10 +107,14 @@ struct ShowQuery {
 
 async fn show(
     state: web::Data<AppState>,
-    auth: PageAuth,
+    reader: PageReader,
     id: web::Path<i64>,
     query: web::Query<ShowQuery>,
 ) -> Result<HttpResponse, PageError> {
+    if reader.auth.is_none() {
+        // Anonymous visitors read what is assigned to a part of a public model.
+        reader.allow(crate::store::visibility::content(&state.db, *id).await?)?;
+    }
     let content = contents::get(&state.db, *id).await?;
     let merged_with = match query.merged {
         Some(n) => contents::revision(&state.db, content.id, n).await.ok(),
@@ -118,8 +122,15 @@ async fn show(
     };
     let current = contents::revision(&state.db, content.id, content.current_revision).await?;
     let attachments = attachments::list_for_content(&state.db, content.id).await?;
-    let parts = assignments::parts_for_content(&state.db, content.id).await?;
-    let layout = Layout::new(&auth, content.title.clone());
+    let mut parts = assignments::parts_for_content(&state.db, content.id).await?;
+    let layout = match &reader.auth {
+        Some(auth) => Layout::new(auth, content.title.clone()),
+        None => {
+            let public = crate::store::visibility::public_models(&state.db).await?;
+            parts.retain(|p| public.contains(&p.model_id));
+            Layout::anonymous(content.title.clone())
+        }
+    };
     render(&ContentPage {
         can_edit: layout.can_edit(),
         layout,

@@ -15,7 +15,7 @@ use crate::store::models::{self, Model, NewModel};
 use crate::store::parts::{self, Part};
 use crate::store::users::Role;
 use crate::store::{Page, StoreError, contents};
-use crate::web::auth::{CsrfForm, PageAuth, PageForm};
+use crate::web::auth::{CsrfForm, PageForm, PageReader};
 use crate::web::error::encode_component;
 use crate::web::search::{SearchQuery, run};
 use crate::web::{AppState, PageError};
@@ -29,6 +29,7 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
             .route(web::post().to(create)),
     )
     .service(crate::web::resource("/models/{id}").route(web::get().to(show)))
+    .service(crate::web::resource("/models/{id}/public").route(web::post().to(set_public)))
     .service(crate::web::resource("/parts/{id}/contents").route(web::post().to(assign)))
     .service(
         crate::web::resource("/parts/{id}/contents/{content_id}/remove")
@@ -43,12 +44,51 @@ struct ModelsPage {
     models: Vec<Model>,
 }
 
-async fn list(state: web::Data<AppState>, auth: PageAuth) -> Result<HttpResponse, PageError> {
-    let models = models::list(&state.db, Page::new(Some(1000), None)).await?;
-    render(&ModelsPage {
-        layout: Layout::new(&auth, "Models"),
-        models,
-    })
+async fn list(state: web::Data<AppState>, reader: PageReader) -> Result<HttpResponse, PageError> {
+    let page = Page::new(Some(1000), None);
+    let (layout, models) = match &reader.auth {
+        Some(auth) => (
+            Layout::new(auth, "Models"),
+            models::list(&state.db, page).await?,
+        ),
+        // Anonymous visitors see the public models; with none, the login page.
+        None => {
+            let public = models::list_public(&state.db, page).await?;
+            reader.allow(!public.is_empty())?;
+            (Layout::anonymous("Models"), public)
+        }
+    };
+    render(&ModelsPage { layout, models })
+}
+
+/// The public-access form of the model page (admins).
+#[derive(Debug, Deserialize)]
+struct PublicForm {
+    #[serde(default)]
+    csrf_token: String,
+    /// Checked: anonymous visitors may view the model.
+    #[serde(default)]
+    public: Option<String>,
+}
+
+impl CsrfForm for PublicForm {
+    fn csrf_token(&self) -> &str {
+        &self.csrf_token
+    }
+}
+
+async fn set_public(
+    state: web::Data<AppState>,
+    id: web::Path<i64>,
+    post: PageForm<PublicForm>,
+) -> Result<HttpResponse, PageError> {
+    post.auth.require(Role::Admin)?;
+    let patch = models::ModelPatch {
+        public: Some(post.form.public.is_some()),
+        ..Default::default()
+    };
+    models::update(&state.db, *id, &patch, post.auth.id()).await?;
+    Ok(redirect(&format!("/models/{}", *id)))
 }
 
 #[derive(Debug, Deserialize)]
@@ -172,6 +212,7 @@ async fn assign_candidates(state: &AppState, text: &str) -> Result<Vec<SearchHit
             limit: Some(ASSIGN_CANDIDATES),
             offset: None,
         },
+        None,
     )
     .await?
     .hits)
@@ -238,10 +279,13 @@ fn fmt3(v: &[f64; 3]) -> String {
 
 async fn show(
     state: web::Data<AppState>,
-    auth: PageAuth,
+    reader: PageReader,
     id: web::Path<i64>,
     query: web::Query<ShowQuery>,
 ) -> Result<HttpResponse, PageError> {
+    if reader.auth.is_none() {
+        reader.allow(crate::store::visibility::model(&state.db, *id).await?)?;
+    }
     let model = models::get(&state.db, *id).await?;
     let mut views = Vec::new();
     for part in parts::list_for_model(&state.db, model.id).await? {
@@ -256,10 +300,15 @@ async fn show(
         .bbox
         .map(|b| format!("{} – {}", fmt3(&b.min), fmt3(&b.max)))
         .unwrap_or_else(|| "unknown".into());
-    let build_job = crate::store::jobs::latest_for_model(&state.db, model.id)
-        .await?
-        .map(super::jobs::JobView::new);
-    let layout = Layout::new(&auth, model.title.clone());
+    let (layout, build_job) = match &reader.auth {
+        Some(auth) => (
+            Layout::new(auth, model.title.clone()),
+            crate::store::jobs::latest_for_model(&state.db, model.id)
+                .await?
+                .map(super::jobs::JobView::new),
+        ),
+        None => (Layout::anonymous(model.title.clone()), None),
+    };
     let can_edit = layout.can_edit();
     let assign_notice = if can_edit {
         AssignNotice::from_query(&state, &query, |part| {
