@@ -40,8 +40,14 @@ async fn list(
     reader: Reader,
     q: web::Query<PageQuery>,
 ) -> Result<HttpResponse, ApiError> {
-    // Anonymous visitors see the public models only.
+    // Anonymous visitors see the public models only (and, with none, must log in).
     let list = if reader.is_anonymous() {
+        if crate::store::visibility::public_models(&state.db)
+            .await?
+            .is_empty()
+        {
+            return Err(ApiError::Unauthorized);
+        }
         models::list_public(&state.db, q.page()).await?
     } else {
         models::list(&state.db, q.page()).await?

@@ -39,7 +39,7 @@ pub struct SearchQuery {
 }
 
 /// The models a search may look in: all (`None`) with a session; without one the public
-/// models only (and a model filter naming another is 401).
+/// models only (401 when there is none, or when a model filter names another).
 pub async fn searchable(
     state: &AppState,
     anonymous: bool,
@@ -51,7 +51,11 @@ pub async fn searchable(
     match model {
         Some(m) if visibility::model(&state.db, m).await? => Ok(Some(vec![m])),
         Some(_) => Err(ApiError::Unauthorized),
-        None => Ok(Some(visibility::public_models(&state.db).await?)),
+        None => match visibility::public_models(&state.db).await? {
+            // No public model: there is nothing to search without logging in.
+            public if public.is_empty() => Err(ApiError::Unauthorized),
+            public => Ok(Some(public)),
+        },
     }
 }
 

@@ -59,7 +59,8 @@ fn anonymous_visitors_read_public_models_only_and_never_write() {
     let anon = server.client();
 
     // Nothing is public yet.
-    assert_eq!(anon.get("/api/v1/models").json(), json!([]));
+    anon.get("/api/v1/models").assert_error(401);
+    anon.get("/api/v1/search?q=rosette").assert_error(401);
     anon.get(&format!("/api/v1/models/{open}"))
         .assert_error(401);
     let r = anon.get("/models");
