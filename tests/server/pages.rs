@@ -103,6 +103,25 @@ fn pages_work_without_javascript() {
     assert!(model_page.contains(&format!("<div id=\"viewer\" data-model-id=\"{model_id}\"")));
     assert!(model_page.contains("<em>wooden</em>"));
     assert!(admin.get("/models").text().contains("Temple gate"));
+    // Its title and description are edited on its page.
+    assert!(model_page.contains(&format!("action=\"/models/{model_id}/edit\"")));
+    let r = admin.post_form(
+        &format!("/models/{model_id}/edit"),
+        &[
+            ("csrf_token", &csrf),
+            ("title", "Temple gate (east)"),
+            ("description", "A *carved* gate"),
+        ],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    let model_page = admin.get(&model_url).text();
+    assert!(model_page.contains("Temple gate (east)") && model_page.contains("<em>carved</em>"));
+    let r = admin.post_form(
+        &format!("/models/{model_id}/edit"),
+        &[("csrf_token", &csrf), ("title", "  "), ("description", "")],
+    );
+    assert_eq!(r.status, 400, "a blank title is refused");
+    assert!(admin.get(&model_url).text().contains("Temple gate (east)"));
 
     let editor = form_login(&server, "edna", "edna-password");
     // Editors cannot open admin pages.

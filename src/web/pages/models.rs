@@ -30,6 +30,7 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     )
     .service(crate::web::resource("/models/{id}").route(web::get().to(show)))
     .service(crate::web::resource("/models/{id}/public").route(web::post().to(set_public)))
+    .service(crate::web::resource("/models/{id}/edit").route(web::post().to(edit)))
     .service(crate::web::resource("/parts/{id}/contents").route(web::post().to(assign)))
     .service(
         crate::web::resource("/parts/{id}/contents/{content_id}/remove")
@@ -59,6 +60,39 @@ async fn list(state: web::Data<AppState>, reader: PageReader) -> Result<HttpResp
         }
     };
     render(&ModelsPage { layout, models })
+}
+
+/// The title and description form of the model page (editors).
+#[derive(Debug, Deserialize)]
+struct EditModelForm {
+    #[serde(default)]
+    csrf_token: String,
+    title: String,
+    #[serde(default)]
+    description: String,
+}
+
+impl CsrfForm for EditModelForm {
+    fn csrf_token(&self) -> &str {
+        &self.csrf_token
+    }
+}
+
+async fn edit(
+    state: web::Data<AppState>,
+    id: web::Path<i64>,
+    post: PageForm<EditModelForm>,
+) -> Result<HttpResponse, PageError> {
+    post.auth.require(Role::Editor)?;
+    let patch = models::ModelPatch {
+        title: Some(post.form.title.clone()),
+        description: Some(post.form.description.replace("\r\n", "\n")),
+        ..Default::default()
+    };
+    models::update(&state.db, *id, &patch, post.auth.id()).await?;
+    // A new title is searchable in the contents on the model's parts.
+    state.sync_search().await;
+    Ok(redirect(&format!("/models/{}", *id)))
 }
 
 /// The public-access form of the model page (admins).

@@ -83,7 +83,7 @@ export class InfoPanel {
       this.root.append(el('p', 'muted', 'This part no longer exists.'));
       return;
     }
-    const meta = el('p', 'muted small', `Part ${id} · ${entry.part.kind} · ${entry.part.vertex_count} vertices`);
+    const meta = el('p', 'muted small', `Part ${id} · ${entry.part.kind} · ${entry.part.vertex_count.toLocaleString()} ${entry.part.vertex_count === 1 ? 'vertex' : 'vertices'}`);
     this.root.append(meta);
     if (entry.contents.length === 0) {
       this.root.append(el('p', 'muted', 'No information is assigned to this part yet.'));

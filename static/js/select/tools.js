@@ -135,7 +135,7 @@ export class SelectTools {
     else if (s.draft) {
       const d = s.draft;
       const delta = d.base || d.part_id ? ` (+${d.added.toLocaleString()} / −${d.removed.toLocaleString()})` : '';
-      parts.push(`${d.vertex_count.toLocaleString()} vertices${delta}`);
+      parts.push(`${d.vertex_count.toLocaleString()} ${d.vertex_count === 1 ? 'vertex' : 'vertices'}${delta}`);
     } else if (s.hint) parts.push(s.hint);
     this.status.textContent = parts.join(' · ');
     if (s.draft && !s.busy) this.status.dataset.vertexCount = String(s.draft.vertex_count);
