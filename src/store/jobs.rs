@@ -364,6 +364,18 @@ pub async fn latest_for_model(db: &Db, model_id: i64) -> Result<Option<Job>> {
     Ok(row.as_ref().map(from_row).transpose()?)
 }
 
+/// The models whose latest build was cancelled (their status is `failed`; pages say
+/// "cancelled").
+pub async fn cancelled_models(db: &Db) -> Result<std::collections::HashSet<i64>> {
+    let ids: Vec<i64> = sqlx::query_scalar(
+        "SELECT model_id FROM jobs WHERE status = 'cancelled' AND id IN
+         (SELECT MAX(id) FROM jobs WHERE model_id IS NOT NULL GROUP BY model_id)",
+    )
+    .fetch_all(&db.read)
+    .await?;
+    Ok(ids.into_iter().collect())
+}
+
 /// Whether any job of `kind` was ever created.
 pub async fn exists_of_kind(db: &Db, kind: JobKind) -> Result<bool> {
     let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE kind = ?")

@@ -143,6 +143,11 @@ fn cancelling_running_and_queued_builds() {
     let m = admin.get(&format!("/api/v1/models/{model}")).json();
     assert_eq!(m["status"], "failed");
     assert_eq!(m["error"], "build cancelled");
+    // The pages say "cancelled", not "failed".
+    let list = admin.get("/models").text();
+    assert!(list.contains("status-cancelled\">cancelled"), "models page");
+    let page = admin.get(&format!("/models/{model}")).text();
+    assert!(page.contains("status-cancelled\">cancelled"), "model page");
     no_leftovers(dir.path());
     assert!(names(&dir.path().join("models")).is_empty());
 }

@@ -42,7 +42,15 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
 #[template(path = "models.html")]
 struct ModelsPage {
     layout: Layout,
-    models: Vec<Model>,
+    models: Vec<ModelRow>,
+}
+
+/// A model as the list shows it.
+struct ModelRow {
+    model: Model,
+    /// Its status in words: `cancelled` for a model whose latest build was cancelled (its
+    /// status is `failed`), else the status.
+    status: &'static str,
 }
 
 async fn list(state: web::Data<AppState>, reader: PageReader) -> Result<HttpResponse, PageError> {
@@ -59,6 +67,19 @@ async fn list(state: web::Data<AppState>, reader: PageReader) -> Result<HttpResp
             (Layout::anonymous("Models"), public)
         }
     };
+    let cancelled = crate::store::jobs::cancelled_models(&state.db).await?;
+    let models = models
+        .into_iter()
+        .map(|model| ModelRow {
+            status: if model.status == models::ModelStatus::Failed && cancelled.contains(&model.id)
+            {
+                "cancelled"
+            } else {
+                model.status.as_str()
+            },
+            model,
+        })
+        .collect();
     render(&ModelsPage { layout, models })
 }
 
@@ -190,6 +211,8 @@ fn viewer_json(
 struct ModelPage {
     layout: Layout,
     model: Model,
+    /// The status in words (`cancelled` when the latest build was).
+    status: &'static str,
     description_html: String,
     bbox: String,
     parts: Vec<PartView>,
@@ -357,6 +380,15 @@ async fn show(
         None
     };
     let ready = model.status == models::ModelStatus::Ready;
+    let cancelled = model.status == models::ModelStatus::Failed
+        && build_job
+            .as_ref()
+            .is_some_and(|j| j.job.status == crate::store::jobs::JobStatus::Cancelled);
+    let status = if cancelled {
+        "cancelled"
+    } else {
+        model.status.as_str()
+    };
     let viewer_message = if !crate::web::vendor::available() {
         "The 3D viewer is unavailable on this server: its front-end dependencies are not \
          installed (npm ci --prefix static)."
@@ -374,6 +406,7 @@ async fn show(
         )
     };
     render(&ModelPage {
+        status,
         assign_notice,
         build_job,
         can_edit,
