@@ -5,6 +5,7 @@ use actix_web::{HttpResponse, web};
 use askama::Template;
 use serde::Deserialize;
 
+use super::filters;
 use super::{Layout, redirect, render_status};
 use crate::store::Page;
 use crate::store::users::{self, Role, User, UserPatch};

@@ -8,6 +8,7 @@ use actix_web::{HttpRequest, HttpResponse, web};
 use askama::Template;
 use serde::Deserialize;
 
+use super::filters;
 use super::{CsrfOnly, Layout, lf, redirect, render, render_status};
 use crate::app::AppError;
 use crate::app::contents::{EditConflict, OnStale};

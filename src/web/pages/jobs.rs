@@ -8,6 +8,7 @@ use actix_web::{HttpRequest, HttpResponse, web};
 use askama::Template;
 use futures_util::StreamExt;
 
+use super::filters;
 use super::{CsrfOnly, Layout, redirect, render_status};
 use crate::jobs::{
     Companion, MAX_SCAN_FILES, ReceivedScan, SCAN_EXTENSIONS, UploadTarget, companion_path,

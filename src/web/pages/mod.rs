@@ -8,6 +8,64 @@ pub mod jobs;
 pub mod models;
 pub mod search;
 
+/// Template filters shared by the pages (each page module brings `filters` into scope).
+pub mod filters {
+    /// An RFC 3339 time as people read it, `2026-12-02 16:43 UTC` (the exact value stays in
+    /// the `<time datetime>` attribute); anything else as it is.
+    #[askama::filter_fn]
+    pub fn when(value: &dyn std::fmt::Display, _: &dyn askama::Values) -> askama::Result<String> {
+        Ok(super::readable_time(&value.to_string()))
+    }
+
+    /// A count with thousands separators: `1,234,567`.
+    #[askama::filter_fn]
+    pub fn count(value: &dyn std::fmt::Display, _: &dyn askama::Values) -> askama::Result<String> {
+        Ok(super::grouped(&value.to_string()))
+    }
+}
+
+/// `2026-12-02T16:43:05Z` (or with fractions or an offset) → `2026-12-02 16:43 UTC`.
+fn readable_time(s: &str) -> String {
+    let b = s.as_bytes();
+    let shaped = b.len() >= 17
+        && b[4] == b'-'
+        && b[7] == b'-'
+        && b[10] == b'T'
+        && b[13] == b':'
+        && s.is_char_boundary(16);
+    if !shaped {
+        return s.to_string();
+    }
+    let zone = if s.ends_with('Z') || s.ends_with("+00:00") {
+        " UTC".to_string()
+    } else {
+        match s.rfind(['+', '-']) {
+            Some(i) if i > 16 => format!(" {}", &s[i..]),
+            _ => String::new(),
+        }
+    };
+    format!("{} {}{zone}", &s[..10], &s[11..16])
+}
+
+/// Digits grouped by three with commas (a leading `-` kept); anything else as it is.
+fn grouped(s: &str) -> String {
+    let (sign, digits) = match s.strip_prefix('-') {
+        Some(d) => ("-", d),
+        None => ("", s),
+    };
+    if digits.is_empty() || !digits.bytes().all(|c| c.is_ascii_digit()) {
+        return s.to_string();
+    }
+    let mut out = String::with_capacity(digits.len() + digits.len() / 3 + 1);
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    format!("{sign}{out}")
+}
+
 use actix_web::http::StatusCode;
 use actix_web::http::header::{self, ContentType};
 use actix_web::{HttpResponse, web};
@@ -127,4 +185,24 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     search::configure(cfg);
     admin::configure(cfg);
     jobs::configure(cfg);
+}
+
+#[cfg(test)]
+mod filter_tests {
+    #[test]
+    fn times_and_counts_read_as_people_read_them() {
+        assert_eq!(
+            super::readable_time("2026-12-02T16:43:05Z"),
+            "2026-12-02 16:43 UTC"
+        );
+        assert_eq!(
+            super::readable_time("2026-12-02T16:43:05.123+02:00"),
+            "2026-12-02 16:43 +02:00"
+        );
+        assert_eq!(super::readable_time("yesterday"), "yesterday");
+        assert_eq!(super::grouped("1234567"), "1,234,567");
+        assert_eq!(super::grouped("-1000"), "-1,000");
+        assert_eq!(super::grouped("999"), "999");
+        assert_eq!(super::grouped("12a"), "12a");
+    }
 }

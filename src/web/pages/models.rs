@@ -8,6 +8,7 @@ use actix_web::{HttpResponse, web};
 use askama::Template;
 use serde::Deserialize;
 
+use super::filters;
 use super::{Layout, redirect, render};
 use crate::search::SearchHit;
 use crate::store::assignments::{self, AssignedContent};
