@@ -146,6 +146,29 @@ describe('the information panel and the assign step on the real server', () => {
     await page.close();
   });
 
+  test('on a phone the panel opens in view, as a sheet over the viewer; pages do not overflow sideways', async () => {
+    const page = await openModel();
+    await page.setViewportSize({ width: 390, height: 844 });
+    await waitViewer(page, (s) => settled(s) && s.callouts.includes(seeded.part.id));
+    await page.locator(`.callout[data-part-id="${seeded.part.id}"]`).click();
+    const panel = page.locator('.viewer-panel');
+    await panel.waitFor({ state: 'visible' });
+    const box = await panel.boundingBox();
+    assert.ok(box, 'the panel has a box');
+    assert.ok(box.y >= 0 && box.y + box.height <= 844 + 0.5, `the panel is within the screen: ${JSON.stringify(box)}`);
+    assert.ok(box.height >= 120, `the panel shows its information: ${JSON.stringify(box)}`);
+    assert.match(await panel.textContent(), /Central dome/);
+    // Still closed by its button, and the models page fits the screen's width.
+    await page.keyboard.press('Escape');
+    await panel.waitFor({ state: 'hidden' });
+    for (const path of ['/models', `/models/${model.id}`, '/search?q=dome']) {
+      await page.goto(`${server.base}${path}`);
+      const wide = await page.evaluate(() => document.documentElement.scrollWidth);
+      assert.ok(wide <= 390, `${path} is ${wide} px wide on a 390 px screen`);
+    }
+    await page.close();
+  });
+
   test('a search result opens the panel with the matching paragraph marked and in view', async () => {
     const page = await browser.page();
     await login(page, server.base, ADMIN);
