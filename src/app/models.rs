@@ -298,11 +298,10 @@ async fn remove_model_file(data_dir: &Path, relative: &str) {
         return;
     }
     let path = data_dir.join(rel);
-    let result = match tokio::fs::metadata(&path).await {
-        Ok(m) if m.is_dir() => tokio::fs::remove_dir_all(&path).await,
-        Ok(_) => tokio::fs::remove_file(&path).await,
-        Err(_) => Ok(()),
-    };
+    let p = path.clone();
+    let result = tokio::task::spawn_blocking(move || crate::remove_file_or_dir(&p))
+        .await
+        .unwrap_or_else(|e| Err(std::io::Error::other(e)));
     if let Err(e) = result {
         tracing::warn!(path = %path.display(), error = %e, "cannot remove LOD file");
     }

@@ -959,11 +959,10 @@ impl Jobs {
 
 /// Removes a file or a folder; a missing one is fine.
 async fn remove_path(path: &Path) {
-    let result = match tokio::fs::metadata(path).await {
-        Ok(m) if m.is_dir() => tokio::fs::remove_dir_all(path).await,
-        Ok(_) => tokio::fs::remove_file(path).await,
-        Err(_) => Ok(()),
-    };
+    let p = path.to_path_buf();
+    let result = tokio::task::spawn_blocking(move || crate::remove_file_or_dir(&p))
+        .await
+        .unwrap_or_else(|e| Err(std::io::Error::other(e)));
     if let Err(e) = result {
         tracing::warn!(path = %path.display(), error = %e, "cannot remove upload");
     }
@@ -998,12 +997,7 @@ fn cleanup_dirs(
             if !leftover {
                 continue;
             }
-            let r = if entry.file_type().is_ok_and(|t| t.is_dir()) {
-                std::fs::remove_dir_all(&path)
-            } else {
-                std::fs::remove_file(&path)
-            };
-            match r {
+            match crate::remove_file_or_dir(&path) {
                 Ok(()) => removed.push(path),
                 Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove"),
             }
@@ -1025,11 +1019,7 @@ fn cleanup_dirs(
             let path = entry.path();
             let orphan = name.starts_with("src-") && !keep.contains(name.as_str());
             if orphan {
-                let removed_one = match entry.file_type() {
-                    Ok(t) if t.is_dir() => std::fs::remove_dir_all(&path),
-                    _ => std::fs::remove_file(&path),
-                };
-                match removed_one {
+                match crate::remove_file_or_dir(&path) {
                     Ok(()) => removed.push(path),
                     Err(e) => tracing::warn!(path = %path.display(), error = %e, "cannot remove"),
                 }

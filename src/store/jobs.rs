@@ -236,14 +236,7 @@ pub async fn create_for_model(
     user_id: i64,
 ) -> Result<(Model, Job)> {
     let mut tx = db.begin().await?;
-    let model = models::get_tx(&mut tx, model_id).await?;
-    if !matches!(model.status, ModelStatus::Pending | ModelStatus::Failed) {
-        return Err(StoreError::Conflict(format!(
-            "model {model_id} is {}: only a model without a built scan (pending, or its build \
-             failed or was cancelled) takes a new one",
-            model.status.as_str()
-        )));
-    }
+    check_takes_scan(&models::get_tx(&mut tx, model_id).await?)?;
     let active: i64 = sqlx::query_scalar(
         "SELECT COUNT(*) FROM jobs WHERE model_id = ? AND status IN ('queued', 'running')",
     )
@@ -261,6 +254,20 @@ pub async fn create_for_model(
     let job = get_tx(&mut tx, id).await?;
     tx.commit().await?;
     Ok((model, job))
+}
+
+/// [`StoreError::Conflict`] unless `model` can take a new scan: it has none built (status
+/// `pending`, or `failed` after a failed or cancelled build).
+pub fn check_takes_scan(model: &Model) -> Result<()> {
+    if matches!(model.status, ModelStatus::Pending | ModelStatus::Failed) {
+        return Ok(());
+    }
+    Err(StoreError::Conflict(format!(
+        "model {} is {}: only a model without a built scan (pending, or its build failed or \
+         was cancelled) takes a new one",
+        model.id,
+        model.status.as_str()
+    )))
 }
 
 /// Inserts `job` for `model_id` (running at once when it names its runner), with its audit

@@ -50,16 +50,7 @@ impl From<JobError> for ApiError {
 /// Whether model `id` can take a new scan (the store checks again when queueing).
 pub async fn check_retry(state: &AppState, id: i64) -> Result<(), ApiError> {
     let model = crate::store::models::get(&state.db, id).await?;
-    match model.status {
-        crate::store::models::ModelStatus::Pending | crate::store::models::ModelStatus::Failed => {
-            Ok(())
-        }
-        other => Err(ApiError::Conflict(format!(
-            "model {id} is {}: only a model without a built scan (pending, or its build failed \
-             or was cancelled) takes a new one",
-            other.as_str()
-        ))),
-    }
+    Ok(jobs::check_takes_scan(&model)?)
 }
 
 pub(crate) fn too_large(limit: u64) -> ApiError {

@@ -487,6 +487,23 @@ async fn hierarchy(
 
 /// One patch blob
 ///
+/// The conditional and range request headers of the byte-serving routes (patch blobs, the
+/// whole file), for the OpenAPI document.
+#[derive(utoipa::IntoParams)]
+#[into_params(parameter_in = Header)]
+#[allow(dead_code)] // described, never constructed: the handlers read the headers themselves
+struct RangeHeaders {
+    /// bytes=a-b, bytes=a- or bytes=-n
+    #[param(rename = "Range")]
+    range: Option<String>,
+    /// serve the range only while the ETag is this one
+    #[param(rename = "If-Range")]
+    if_range: Option<String>,
+    /// an ETag seen before, or `*`
+    #[param(rename = "If-None-Match")]
+    if_none_match: Option<String>,
+}
+
 /// The blob of node `node` (`docs/FORMAT.md`, "Patch blob"), `application/octet-stream`,
 /// `Content-Encoding: identity` (blobs are compressed already). `ETag` = its CRC-32 as 8
 /// lower-case hex digits; `Cache-Control: public, max-age=31536000, immutable` (a node's
@@ -497,9 +514,7 @@ async fn hierarchy(
     params(
         ("id" = i64, Path, description = "model id"),
         ("node" = u32, Path, description = "node (patch) id, 0 to node_count - 1"),
-        ("Range" = Option<String>, Header, description = "bytes=a-b, bytes=a- or bytes=-n"),
-        ("If-Range" = Option<String>, Header, description = "serve the range only while the ETag is this one"),
-        ("If-None-Match" = Option<String>, Header, description = "an ETag seen before, or `*`"),
+        RangeHeaders,
     ),
     responses(
         (status = 200, description = "The blob", body = super::openapi::Binary,
@@ -553,9 +568,7 @@ async fn patch(
 #[utoipa::path(get, path = "/api/v1/models/{id}/lod/file", tag = "lod",
     params(
         ("id" = i64, Path, description = "model id"),
-        ("Range" = Option<String>, Header, description = "bytes=a-b, bytes=a- or bytes=-n"),
-        ("If-Range" = Option<String>, Header, description = "serve the range only while the ETag is this one"),
-        ("If-None-Match" = Option<String>, Header, description = "an ETag seen before, or `*`"),
+        RangeHeaders,
     ),
     responses(
         (status = 200, description = "The file", body = super::openapi::Binary,

@@ -8,13 +8,13 @@
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { mkdtempSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
 import { Cut, makeView, projectedError } from '../../static/js/lod/cut.js';
-import { parseBinary } from '../../static/js/lod/table.js';
 import { meshwiki, sampleMesh } from './support/env.mjs';
+import { readLod } from './support/regions.mjs';
 
 const DIRECTIONS = [
   [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],
@@ -24,12 +24,6 @@ const DIRECTIONS = [
   return d.map((v) => v / l);
 });
 
-function table(lodPath) {
-  const file = new Uint8Array(readFileSync(lodPath));
-  const view = new DataView(file.buffer, file.byteOffset, file.byteLength);
-  const blobsOffset = view.getUint32(136, true) + view.getUint32(140, true) * 2 ** 32;
-  return parseBinary(file.slice(0, blobsOffset).buffer);
-}
 
 /** Views around the root sphere: far, near, close-up inside it, two sizes and thresholds. */
 function views(t) {
@@ -87,7 +81,7 @@ test('the browser draws the engine\'s cut for every view of real hierarchies', a
   for (const [k, mesh] of meshes.entries()) {
     const lod = join(tmp, `m${k}.mwlod`);
     meshwiki(['lod', 'build', mesh.path, lod]);
-    const tab = table(lod);
+    const tab = readLod(lod).table;
     const { views: list, radius } = views(tab);
     const viewsPath = join(tmp, `views${k}.json`);
     writeFileSync(viewsPath, JSON.stringify(list));

@@ -10,15 +10,13 @@ import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
 import { decodePatch, DecodeError } from '../../static/js/lod/decode.js';
-import { parseBinary, crc32 } from '../../static/js/lod/table.js';
+import { crc32 } from '../../static/js/lod/table.js';
 import { decoderDeps, meshwiki, sampleMesh } from './support/env.mjs';
+import { readLod } from './support/regions.mjs';
 
 function checkFile(lodPath, dumpPath, deps) {
-  const file = new Uint8Array(readFileSync(lodPath));
+  const { file, table } = readLod(lodPath);
   const dump = JSON.parse(readFileSync(dumpPath, 'utf8'));
-  const view = new DataView(file.buffer, file.byteOffset, file.byteLength);
-  const blobsOffset = view.getUint32(136, true) + view.getUint32(140, true) * 2 ** 32;
-  const table = parseBinary(file.slice(0, blobsOffset).buffer);
   assert.equal(table.nodeCount, dump.node_count);
   assert.equal(table.groupCount, dump.group_count);
   assert.deepEqual(table.grid.origin, dump.grid.origin);
@@ -76,9 +74,7 @@ test('corrupt blobs are errors, never crashes or hangs', async () => {
     const mesh = sampleMesh(tmp, ['gargoyle_50k_vcolor.ply']);
     const lod = join(tmp, 'c.mwlod');
     meshwiki(['lod', 'build', mesh.path, lod]);
-    const file = new Uint8Array(readFileSync(lod));
-    const view = new DataView(file.buffer);
-    const table = parseBinary(file.slice(0, view.getUint32(136, true)).buffer);
+    const { file, table } = readLod(lod);
     const last = table.nodeCount - 1;
     const blob = file.slice(table.offset[last], table.offset[last] + table.length[last]);
     for (let cut = 0; cut < blob.length; cut += 97) {

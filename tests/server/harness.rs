@@ -326,31 +326,7 @@ impl Client {
         data: &[u8],
         csrf: bool,
     ) -> Resp {
-        let boundary = "----meshwikitestboundary7d93";
-        let mut body = Vec::new();
-        for (k, v) in fields {
-            body.extend_from_slice(
-                format!(
-                    "--{boundary}\r\nContent-Disposition: form-data; name=\"{k}\"\r\n\r\n{v}\r\n"
-                )
-                .as_bytes(),
-            );
-        }
-        body.extend_from_slice(
-            format!(
-                "--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"{filename}\"\r\nContent-Type: {media_type}\r\n\r\n"
-            )
-            .as_bytes(),
-        );
-        body.extend_from_slice(data);
-        body.extend_from_slice(format!("\r\n--{boundary}--\r\n").as_bytes());
-        self.request(
-            "POST",
-            path,
-            Some(&format!("multipart/form-data; boundary={boundary}")),
-            body,
-            csrf,
-        )
+        self.multipart(path, fields, &[(filename, media_type, data)], csrf)
     }
 
     /// A multipart upload of several `file` fields `(filename, media type, bytes)` (text
@@ -360,6 +336,17 @@ impl Client {
         path: &str,
         fields: &[(&str, &str)],
         files: &[(&str, &str, &[u8])],
+    ) -> Resp {
+        self.multipart(path, fields, files, false)
+    }
+
+    /// A multipart POST: text fields, then one `file` field per file.
+    fn multipart(
+        &self,
+        path: &str,
+        fields: &[(&str, &str)],
+        files: &[(&str, &str, &[u8])],
+        csrf: bool,
     ) -> Resp {
         let boundary = "----meshwikitestboundary7d93";
         let mut body = Vec::new();
@@ -387,7 +374,7 @@ impl Client {
             path,
             Some(&format!("multipart/form-data; boundary={boundary}")),
             body,
-            false,
+            csrf,
         )
     }
 

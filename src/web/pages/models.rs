@@ -72,16 +72,21 @@ async fn list(state: web::Data<AppState>, reader: PageReader) -> Result<HttpResp
     let models = models
         .into_iter()
         .map(|model| ModelRow {
-            status: if model.status == models::ModelStatus::Failed && cancelled.contains(&model.id)
-            {
-                "cancelled"
-            } else {
-                model.status.as_str()
-            },
+            status: status_words(&model, cancelled.contains(&model.id)),
             model,
         })
         .collect();
     render(&ModelsPage { layout, models })
+}
+
+/// A model's status as the pages say it: `cancelled` for a failed model whose latest build was
+/// cancelled, else its status.
+fn status_words(model: &Model, latest_cancelled: bool) -> &'static str {
+    if model.status == models::ModelStatus::Failed && latest_cancelled {
+        "cancelled"
+    } else {
+        model.status.as_str()
+    }
 }
 
 /// The title and description form of the model page (editors).
@@ -381,15 +386,12 @@ async fn show(
         None
     };
     let ready = model.status == models::ModelStatus::Ready;
-    let cancelled = model.status == models::ModelStatus::Failed
-        && build_job
+    let status = status_words(
+        &model,
+        build_job
             .as_ref()
-            .is_some_and(|j| j.job.status == crate::store::jobs::JobStatus::Cancelled);
-    let status = if cancelled {
-        "cancelled"
-    } else {
-        model.status.as_str()
-    };
+            .is_some_and(|j| j.job.status == crate::store::jobs::JobStatus::Cancelled),
+    );
     let viewer_message = if !crate::web::vendor::available() {
         "The 3D viewer is unavailable on this server: its front-end dependencies are not \
          installed (npm ci --prefix static)."

@@ -6,12 +6,21 @@ import { decodePatch } from '../../../static/js/lod/decode.js';
 import { parseBinary } from '../../../static/js/lod/table.js';
 import { decoderDeps } from './env.mjs';
 
+/**
+ * A LOD file's bytes and its tables, parsed by the browser's reader from the header and
+ * tables that precede the blobs (their offset: the header's u64 at byte 136, docs/FORMAT.md).
+ */
+export function readLod(lodPath) {
+  const file = new Uint8Array(readFileSync(lodPath));
+  const view = new DataView(file.buffer, file.byteOffset, file.byteLength);
+  const blobsOffset = view.getUint32(136, true) + view.getUint32(140, true) * 2 ** 32;
+  return { file, table: parseBinary(file.slice(0, blobsOffset).buffer) };
+}
+
 /** Every full-resolution vertex of a LOD file: {ids, positions, table}. */
 export async function leafVertices(lodPath) {
   const deps = await decoderDeps();
-  const file = new Uint8Array(readFileSync(lodPath));
-  const view = new DataView(file.buffer, file.byteOffset, file.byteLength);
-  const table = parseBinary(file.slice(0, view.getUint32(136, true)).buffer);
+  const { file, table } = readLod(lodPath);
   const ids = [];
   const positions = [];
   for (let i = 0; i < table.nodeCount; i++) {
