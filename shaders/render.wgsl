@@ -30,7 +30,8 @@ struct Draw {
     indices: u32,
     // offset of the per-vertex highlight masks in `masks`, 0xFFFFFFFF when none
     masks: u32,
-    _pad: u32,
+    // offset of the texture coordinates (unorm16 pairs), 0xFFFFFFFF when the patch has none
+    uvs: u32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -40,6 +41,9 @@ struct Draw {
 @group(0) @binding(3) var<uniform> palette: array<vec4<f32>, 256>;
 // one patch: f32 positions and normals (3 per vertex), RGBA8 colours, original ids, indices
 @group(1) @binding(0) var<storage, read> patch_data: array<u32>;
+// the patch's texture atlas (a white texel when it has none), sampled bilinearly
+@group(1) @binding(1) var atlas: texture_2d<f32>;
+@group(1) @binding(2) var atlas_sampler: sampler;
 
 // Few varyings: a software rasteriser bins every triangle with its interpolants.
 struct VOut {
@@ -53,6 +57,8 @@ struct VOut {
     @location(4) @interpolate(flat) masks: u32,
     // node id, triangle index within the patch
     @location(5) @interpolate(flat) node_tri: vec2<u32>,
+    // texture coordinates in the patch's atlas; x < 0 when untextured
+    @location(6) uv: vec2<f32>,
 }
 
 fn load_vec3(offset: u32, v: u32) -> vec3<f32> {
@@ -88,6 +94,11 @@ fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
     out.ids = vec3<u32>(patch_data[d.ids + t.x], patch_data[d.ids + t.y], patch_data[d.ids + t.z]);
     out.masks = vertex_mask(d, t.x) | (vertex_mask(d, t.y) << 9u) | (vertex_mask(d, t.z) << 18u);
     out.node_tri = vec2<u32>(d.node, tri);
+    if (d.uvs != 0xFFFFFFFFu) {
+        out.uv = unpack2x16unorm(patch_data[d.uvs + v]);
+    } else {
+        out.uv = vec2<f32>(-1.0, -1.0);
+    }
     return out;
 }
 
@@ -129,11 +140,20 @@ fn facing_normal(in: VOut, front: bool) -> vec3<f32> {
     return n;
 }
 
+// Surface colour: the patch's texture, else the vertex colour. Texels, like vertex colours, are
+// sRGB bytes taken as they are.
+fn albedo(in: VOut) -> vec3<f32> {
+    if (in.uv.x >= 0.0) {
+        return textureSampleLevel(atlas, atlas_sampler, in.uv, 0.0).rgb;
+    }
+    return in.color.rgb;
+}
+
 // Headlight plus ambient, then the part tint.
 fn shade(in: VOut, n: vec3<f32>, mask: u32) -> vec4<f32> {
     let v = to_eye(in.clip);
     let ndl = abs(dot(n, v));
-    var rgb = in.color.rgb * (frame.light.x + frame.light.y * ndl);
+    var rgb = albedo(in) * (frame.light.x + frame.light.y * ndl);
     let tint = mask & 0xFFu;
     if (tint != 0u) {
         let c = palette[tint];

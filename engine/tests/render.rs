@@ -6,6 +6,9 @@
 //! `MESHWIKI_REQUIRE_GPU_TESTS=1` (then they fail). `MESHWIKI_UPDATE_GOLDEN=1` rewrites the
 //! golden images under `engine/tests/golden/`.
 
+mod common;
+
+use common::psnr;
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{self, BuildOptions, Culling, LodFile};
@@ -132,22 +135,6 @@ fn full_res() -> Cut {
     Cut::Uniform {
         max_error: 0.0,
         frustum: true,
-    }
-}
-
-fn psnr(a: &[[u8; 4]], b: &[[u8; 4]]) -> f64 {
-    let mut se = 0f64;
-    for (p, q) in a.iter().zip(b) {
-        for k in 0..3 {
-            let d = p[k] as f64 - q[k] as f64;
-            se += d * d;
-        }
-    }
-    let mse = se / (a.len() * 3) as f64;
-    if mse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (255.0f64 * 255.0 / mse).log10()
     }
 }
 

@@ -157,6 +157,10 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
             "indices": patch.indices,
             "colors": patch.colors,
             "normals": patch.normals,
+            // Textured models: coordinates per vertex, and the atlas image's size and CRC-32.
+            "uvs": patch.uvs,
+            "image_length": patch.image.as_ref().map(|i| i.len()),
+            "image_crc32": patch.image.as_ref().map(|i| crc32fast::hash(i)),
         }));
     }
     let grid = file.grid();
@@ -166,6 +170,7 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
         "grid": {"origin": grid.origin, "step": grid.step},
         "has_colors": file.has_colors(),
         "has_normals": file.has_normals(),
+        "has_texture": file.has_texture(),
         "patches": patches,
     });
     let text = serde_json::to_string(&out)?;

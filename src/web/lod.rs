@@ -154,6 +154,8 @@ pub struct HierarchyJson {
     pub has_colors: bool,
     /// Whether patches carry normals.
     pub has_normals: bool,
+    /// Every patch carries a texture atlas (`docs/FORMAT.md`, patch blob).
+    pub has_texture: bool,
     /// Size of the whole file in bytes.
     pub file_bytes: u64,
     /// Nodes, by id.
@@ -223,6 +225,7 @@ pub fn hierarchy_json(lod: &LodFile) -> Result<Vec<u8>, serde_json::Error> {
         },
         has_colors: lod.has_colors(),
         has_normals: lod.has_normals(),
+        has_texture: lod.has_texture(),
         file_bytes: lod.bytes().len() as u64,
         nodes,
         groups,

@@ -1,17 +1,20 @@
 // The browser's patch decoder (static/js/lod/decode.js) against the reference decoder
 // (engine/src/lod/codec.rs, through `meshwiki lod dump`) on LOD files the engine built from
 // real scans: identical original ids, grid positions, world positions, triangles, colours
-// and normals.
+// and normals, and for a textured scan texture coordinates and atlas images. Hand-built blobs
+// (no binary needed) check the textured layout of docs/FORMAT.md "Patch blob": the image
+// section in front of the payload, the sixth stream of texture coordinates, wedge vertices.
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { existsSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
-import { decodePatch, DecodeError } from '../../static/js/lod/decode.js';
-import { crc32 } from '../../static/js/lod/table.js';
-import { decoderDeps, meshwiki, sampleMesh } from './support/env.mjs';
+import { decodePatch, decodeYCoCg, DecodeError, jpegSize, predict, walk } from '../../static/js/lod/decode.js';
+import { crc32, parseBinary } from '../../static/js/lod/table.js';
+import { patchBytes } from '../../static/js/lod/stream.js';
+import { SHARED_MESHES, decoderDeps, importStatic, meshwiki, sampleMesh } from './support/env.mjs';
 import { readLod } from './support/regions.mjs';
 
 function checkFile(lodPath, dumpPath, deps) {
@@ -41,8 +44,29 @@ function checkFile(lodPath, dumpPath, deps) {
     if (dump.has_colors) assert.deepEqual(Array.from(p.colors), ref.colors.flat(), `colours of node ${i}`);
     else assert.equal(p.colors, null);
     if (dump.has_normals) assert.deepEqual(Array.from(p.normals), ref.normals.flat().map(Math.fround), `normals of node ${i}`);
+    // Textures (`lod dump` gives `uvs` per vertex and the image's length and CRC-32; binaries
+    // from before textures give neither, and build untextured models only).
+    if (dump.has_texture) {
+      assert.ok(p.image, `image of node ${i}`);
+      assert.equal(p.image.length, ref.image_length, `image length of node ${i}`);
+      assert.equal(crc32(p.image), ref.image_crc32, `image of node ${i}`);
+      assert.ok(jpegSize(p.image), `node ${i}'s image is a JPEG with a size`);
+      assert.deepEqual(Array.from(p.uvs), ref.uvs.flat().map(Math.fround), `texture coordinates of node ${i}`);
+      // Wedges: copies of a vertex (one per chart) decode to the same grid position.
+      const at = new Map();
+      for (let v = 0; v < n; v++) {
+        const g = `${p.gridPositions[v * 3]},${p.gridPositions[v * 3 + 1]},${p.gridPositions[v * 3 + 2]}`;
+        const seen = at.get(p.ids[v]);
+        if (seen === undefined) at.set(p.ids[v], g);
+        else assert.equal(g, seen, `copies of vertex ${p.ids[v]} in node ${i}`);
+      }
+    } else {
+      assert.equal(p.image, null, `image of node ${i}`);
+      assert.equal(p.uvs, null, `texture coordinates of node ${i}`);
+    }
     vertices += n;
   }
+  assert.equal(table.hasTexture, !!dump.has_texture);
   return { nodes: table.nodeCount, vertices };
 }
 
@@ -62,6 +86,31 @@ test('decodes every patch of real LOD files exactly as the engine does', async (
     const { nodes, vertices } = checkFile(lod, dump, deps);
     t.diagnostic(`${mesh.name}: ${nodes} patches, ${vertices} vertices decoded identically`);
   }
+});
+
+/** The textured scan of ../shared/data (glTF with a JPEG texture). */
+const TEXTURED_GLTF = join(SHARED_MESHES, 'mask_bali_100k_textured_gltf', 'mask-gltf-2.0_separated-valid.gltf');
+
+test('decodes every patch of a textured LOD file exactly as the engine does', async (t) => {
+  if (!existsSync(TEXTURED_GLTF)) {
+    t.skip(`${TEXTURED_GLTF} is absent`);
+    return;
+  }
+  const deps = await decoderDeps();
+  const tmp = mkdtempSync(join(tmpdir(), 'mw-decode-tex-'));
+  t.after(() => rmSync(tmp, { recursive: true, force: true }));
+  const lod = join(tmp, 'textured.mwlod');
+  const dump = join(tmp, 'textured.json');
+  meshwiki(['lod', 'build', TEXTURED_GLTF, lod]);
+  meshwiki(['lod', 'dump', lod, '--out', dump]);
+  if (JSON.parse(readFileSync(dump, 'utf8')).has_texture === undefined) {
+    t.skip('this meshwiki binary predates textured LOD files');
+    return;
+  }
+  const { nodes, vertices } = checkFile(lod, dump, deps);
+  const { table } = readLod(lod);
+  assert.ok(table.hasTexture, 'the textured scan builds a textured model');
+  t.diagnostic(`${TEXTURED_GLTF}: ${nodes} textured patches, ${vertices} vertices decoded identically`);
 });
 
 test('corrupt blobs are errors, never crashes or hangs', async () => {
@@ -95,5 +144,236 @@ test('corrupt blobs are errors, never crashes or hangs', async () => {
     }
   } finally {
     rmSync(tmp, { recursive: true, force: true });
+  }
+});
+
+// --- hand-built blobs --------------------------------------------------------------------
+
+/** Appends the zigzag LEB128 varint of an exact integer (decode.js `readVarint` inverted). */
+function putVarint(out, v) {
+  let z = v >= 0 ? 2 * v : -2 * v - 1;
+  do {
+    const low = z % 128;
+    z = Math.floor(z / 128);
+    out.push(z > 0 ? low | 0x80 : low);
+  } while (z > 0);
+}
+
+const u32le = (v) => [v & 255, (v >>> 8) & 255, (v >>> 16) & 255, (v >>> 24) & 255];
+
+/** A minimal baseline JPEG header: SOI, APP0 (JFIF), SOF0 of `width`×`height`, EOI. */
+function fakeJpeg(width, height) {
+  const app0 = [0xff, 0xe0, 0, 16, 0x4a, 0x46, 0x49, 0x46, 0, 1, 1, 0, 0, 1, 0, 1, 0, 0];
+  const sof0 = [0xff, 0xc0, 0, 17, 8, height >> 8, height & 255, width >> 8, width & 255, 3, 1, 0x22, 0, 2, 0x11, 1, 3, 0x11, 1];
+  return Uint8Array.from([0xff, 0xd8, ...app0, 0xff, 0xff, ...sof0, 0xff, 0xd9]);
+}
+
+/**
+ * A square of two texture charts, as the engine stores it (docs/FORMAT.md "Textures"):
+ * vertices 4 and 5 are copies of 1 and 2 (same original id and grid position) with their own
+ * texture coordinates, so each triangle has its chart.
+ */
+const SQUARE = {
+  min: [100, 200, 300],
+  grid: [
+    [0, 0, 0],
+    [4, 0, 1],
+    [0, 4, 2],
+    [4, 4, 3],
+    [4, 0, 1],
+    [0, 4, 2],
+  ],
+  ids: [10, 11, 12, 13, 11, 12],
+  indices: [0, 1, 2, 4, 3, 5],
+  // u16 u, v per vertex; v = 0 is the image's top row.
+  uvs: [
+    [0, 0],
+    [30000, 0],
+    [0, 65535],
+    [65535, 12345],
+    [40000, 1],
+    [32768, 65535],
+  ],
+  colors: [
+    [200, 10, 20, 255],
+    [10, 200, 20, 255],
+    [10, 20, 200, 255],
+    [90, 90, 90, 255],
+    [10, 200, 20, 255],
+    [10, 20, 200, 255],
+  ],
+};
+
+/**
+ * Encodes SQUARE at full precision (shift 0) into a blob: meshoptimizer's encoders for the
+ * indices, colours (stored as given: the decoder's YCoCg inversion applies to them) and texture
+ * coordinates, the decoder's own traversal for the position and id residuals, zero normal
+ * residuals. `texture`: with the image section and the coordinate stream; `compression`: the
+ * header byte (the payload is stored uncompressed either way; tests decompress it themselves).
+ */
+function encodeSquare(encoder, decoder, { texture, image = fakeJpeg(64, 48), compression = 0 }) {
+  const n = SQUARE.grid.length;
+  const t = SQUARE.indices.length / 3;
+  const idxS = encoder.encodeIndexBuffer(new Uint8Array(Uint32Array.from(SQUARE.indices).buffer), t * 3, 4);
+  // The index codec may rotate triangles: residuals follow the order the decoder sees.
+  const decoded = new Uint8Array(t * 12);
+  decoder.decodeIndexBuffer(decoded, t * 3, 4, idxS);
+  const indices = new Uint32Array(decoded.buffer);
+  const pos = SQUARE.grid.flat();
+  const posS = [];
+  const idsS = [];
+  walk(indices, n, (v, kind, a, b, c) => {
+    for (let k = 0; k < 3; k++) putVarint(posS, pos[v * 3 + k] - predict(pos, 3, k, kind, a, b, c));
+    putVarint(idsS, SQUARE.ids[v] - predict(SQUARE.ids, 1, 0, kind, a, b, c));
+  });
+  const colS = encoder.encodeVertexBuffer(Uint8Array.from(SQUARE.colors.flat()), n, 4);
+  // Every vertex of two triangles is a border vertex: two residuals (0) each.
+  const norS = new Uint8Array(2 * n);
+  const uvBytes = new Uint8Array(n * 4);
+  SQUARE.uvs.forEach(([u, v], i) => uvBytes.set([u & 255, u >> 8, v & 255, v >> 8], i * 4));
+  const uvS = texture ? encoder.encodeVertexBuffer(uvBytes, n, 4) : new Uint8Array(0);
+  const streams = [idxS, Uint8Array.from(posS), Uint8Array.from(idsS), colS, norS, uvS];
+  const flags = 1 | 2 | (texture ? 4 : 0);
+  const header = [...u32le(n), ...u32le(t), ...u32le(flags), ...u32le(0), ...SQUARE.min.flatMap(u32le), ...streams.flatMap((s) => u32le(s.length))];
+  assert.equal(header.length, 52);
+  const payload = Uint8Array.from([...header, ...streams.flatMap((s) => Array.from(s))]);
+  const head = [0x4d, 0x57, 0x50, 0x32, compression, texture ? 1 : 0, 0, 0, ...u32le(payload.length)];
+  const section = texture ? [...u32le(image.length), ...image] : [];
+  return { blob: Uint8Array.from([...head, ...section, ...payload]), payload, image };
+}
+
+async function encoderDeps() {
+  const { MeshoptEncoder } = await importStatic('meshoptimizer/encoder');
+  await MeshoptEncoder.ready;
+  return MeshoptEncoder;
+}
+
+/** Everything of a decoded patch but its texture. */
+function geometry(p) {
+  const { uvs: _uvs, image: _image, ...rest } = p;
+  return Object.fromEntries(Object.entries(rest).map(([k, v]) => [k, ArrayBuffer.isView(v) ? Array.from(v) : v]));
+}
+
+test('textured blobs: image section, texture coordinates and wedge vertices (hand-built)', async () => {
+  const deps = await decoderDeps();
+  const encoder = await encoderDeps();
+  const grid = { origin: [0.5, -1, 2], step: 0.25 };
+  const { blob, payload, image } = encodeSquare(encoder, deps.meshopt, { texture: true });
+  const p = decodePatch(blob, grid, deps);
+  assert.equal(p.vertexCount, 6);
+  assert.equal(p.triangleCount, 2);
+  assert.deepEqual(Array.from(p.ids), SQUARE.ids);
+  assert.deepEqual(Array.from(p.gridPositions), SQUARE.grid.flatMap((g) => g.map((x, k) => x + SQUARE.min[k])));
+  // Wedge copies: the same point, their own texture coordinates.
+  assert.deepEqual(Array.from(p.positions.subarray(12, 18)), Array.from(p.positions.subarray(3, 9)));
+  assert.ok(p.uvs instanceof Float32Array);
+  assert.deepEqual(Array.from(p.uvs), SQUARE.uvs.flat().map((q) => Math.fround(q / 65535)));
+  assert.equal(p.uvs[5], 1, 'v = 65535 is the bottom row');
+  assert.ok(p.image instanceof Uint8Array);
+  assert.deepEqual(Array.from(p.image), Array.from(image));
+  // A copy with its own buffer (the worker transfers it without moving the blob).
+  assert.equal(p.image.buffer.byteLength, image.length);
+  assert.deepEqual(jpegSize(p.image), { width: 64, height: 48 });
+  const colors = Uint8Array.from(SQUARE.colors.flat());
+  decodeYCoCg(colors);
+  assert.deepEqual(Array.from(p.colors), Array.from(colors), 'the colour stream still decodes in place');
+  assert.equal(p.normals.length, 18);
+
+  // zstd: what is decompressed starts after the image section.
+  const zstd = encodeSquare(encoder, deps.meshopt, { texture: true, compression: 1 });
+  let given = null;
+  const fake = {
+    ...deps,
+    decompress: (data, out) => {
+      given = data;
+      out.set(zstd.payload);
+      return out;
+    },
+  };
+  const pz = decodePatch(zstd.blob, grid, fake);
+  assert.deepEqual(Array.from(given), Array.from(payload));
+  assert.deepEqual(Array.from(pz.uvs), Array.from(p.uvs));
+  assert.deepEqual(Array.from(pz.image), Array.from(image));
+
+  // Without texture (the layout from before textures): the same geometry, neither uvs nor image.
+  const plain = decodePatch(encodeSquare(encoder, deps.meshopt, { texture: false }).blob, grid, deps);
+  assert.equal(plain.uvs, null);
+  assert.equal(plain.image, null);
+  assert.deepEqual(geometry(plain), geometry(p));
+  // An image section without texture coordinates decodes; the viewer then draws vertex colours.
+  const empty = decodePatch(encodeSquare(encoder, deps.meshopt, { texture: true, image: new Uint8Array(0) }).blob, grid, deps);
+  assert.equal(empty.image.length, 0);
+});
+
+test('textured blobs that do not decode are errors (hand-built)', async () => {
+  const deps = await decoderDeps();
+  const encoder = await encoderDeps();
+  const grid = { origin: [0, 0, 0], step: 1 };
+  const { blob } = encodeSquare(encoder, deps.meshopt, { texture: true });
+  for (let cut = 0; cut < blob.length; cut++) {
+    assert.throws(() => decodePatch(blob.subarray(0, cut), grid, deps), DecodeError, `truncated at ${cut}`);
+  }
+  // An image length past the end of the blob.
+  for (const len of [blob.length, blob.length - 15, 0xffffffff]) {
+    const bad = blob.slice();
+    bad.set(u32le(len), 12);
+    assert.throws(() => decodePatch(bad, grid, deps), (e) => e instanceof DecodeError && e.message === 'blob truncated', `image length ${len}`);
+  }
+  // The image flag on a blob without image section: the payload's first bytes read as length.
+  const plain = encodeSquare(encoder, deps.meshopt, { texture: false }).blob.slice();
+  plain[5] = 1;
+  assert.throws(() => decodePatch(plain, grid, deps), DecodeError);
+  // Texture coordinates flagged, their stream missing.
+  const n = SQUARE.grid.length;
+  const noUvs = encodeSquare(encoder, deps.meshopt, { texture: false }).blob.slice();
+  noUvs[12 + 8] |= 4;
+  assert.throws(() => decodePatch(noUvs, grid, deps), (e) => e instanceof DecodeError && /uvs/.test(e.message), `${n} vertices, no stream`);
+});
+
+test('JPEG sizes come from the frame header', () => {
+  assert.deepEqual(jpegSize(fakeJpeg(4096, 2048)), { width: 4096, height: 2048 });
+  assert.deepEqual(jpegSize(fakeJpeg(1, 1)), { width: 1, height: 1 });
+  assert.equal(jpegSize(new Uint8Array(0)), null);
+  assert.equal(jpegSize(Uint8Array.from([0x89, 0x50, 0x4e, 0x47])), null);
+  assert.equal(jpegSize(fakeJpeg(64, 48).subarray(0, 24)), null);
+  const real = join(SHARED_MESHES, 'mask_bali_100k_textured_gltf', 'Image_0.jpg');
+  if (existsSync(real)) assert.deepEqual(jpegSize(new Uint8Array(readFileSync(real))), { width: 4096, height: 4096 });
+});
+
+test('a textured patch counts its texture (width × height × 4) in the GPU budget', () => {
+  const n = 6;
+  const patch = {
+    vertexCount: n,
+    positions: new Float32Array(n * 3),
+    normals: new Float32Array(n * 3),
+    colors: new Uint8Array(n * 4),
+    ids: new Uint32Array(n),
+    indices: new Uint16Array(6),
+    uvs: null,
+    image: null,
+    imageWidth: 0,
+    imageHeight: 0,
+  };
+  const plain = patchBytes(patch);
+  assert.equal(plain, 72 + 72 + 24 + 12 + 24 + 12);
+  const textured = { ...patch, uvs: new Float32Array(n * 2), image: fakeJpeg(64, 48), imageWidth: 64, imageHeight: 48 };
+  assert.equal(patchBytes(textured), plain + n * 8 + 64 * 48 * 4);
+});
+
+test('the model header flag bit 2 reads as hasTexture', () => {
+  for (const flags of [0, 3, 4, 7]) {
+    const bytes = new Uint8Array(256);
+    bytes.set([0x4d, 0x57, 0x4c, 0x4f, 0x44, 0x00, 0x0d, 0x0a]);
+    const view = new DataView(bytes.buffer);
+    view.setUint32(8, 1, true);
+    view.setUint32(12, flags, true);
+    // Empty tables right after the header; their CRC-32 is that of no bytes.
+    for (const at of [112, 120, 128, 136]) view.setUint32(at, 256, true);
+    for (const at of [152, 156, 160]) view.setUint32(at, crc32(new Uint8Array(0)), true);
+    view.setUint32(252, crc32(bytes.subarray(0, 252)), true);
+    const t = parseBinary(bytes.buffer);
+    assert.equal(t.hasTexture, (flags & 4) !== 0, `flags ${flags}`);
+    assert.equal(t.hasColors, (flags & 1) !== 0);
+    assert.equal(t.hasNormals, (flags & 2) !== 0);
   }
 });

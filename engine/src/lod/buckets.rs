@@ -119,13 +119,16 @@ pub struct Bucket {
     pub triangles: u64,
 }
 
-/// Streams `faces_path` (u32 triples) and writes every face to its centroid's bucket file.
+/// Streams `faces_path` (u32 triples) and writes every face to its centroid's bucket file;
+/// `indexed`: each face followed by its index in the face file (textured scans look up their
+/// texture coordinates by it).
 pub fn write_buckets(
     faces_path: &Path,
     positions: &[[f32; 3]],
     split: &KdSplit,
     dir: &Path,
     buffer_budget: usize,
+    indexed: bool,
 ) -> io::Result<Vec<Bucket>> {
     let n = split.bucket_count();
     let capacity = (buffer_budget / n.max(1)).clamp(4096, 1 << 16);
@@ -138,6 +141,7 @@ pub fn write_buckets(
     }
     let mut reader = BufReader::with_capacity(1 << 20, File::open(faces_path)?);
     let mut chunk = vec![[0u32; 3]; 1 << 16];
+    let mut face_index = 0u32;
     loop {
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut chunk);
         let got = read_full(&mut reader, bytes)?;
@@ -153,6 +157,10 @@ pub fn write_buckets(
                 / 3.0;
             let b = split.bucket_of(c) as usize;
             writers[b].write_all(bytemuck::bytes_of(f))?;
+            if indexed {
+                writers[b].write_all(&face_index.to_ne_bytes())?;
+            }
+            face_index = face_index.wrapping_add(1);
             buckets[b].triangles += 1;
         }
         if got < std::mem::size_of_val(chunk.as_slice()) {
@@ -177,11 +185,19 @@ fn read_full(reader: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
     Ok(got)
 }
 
-/// Loads a bucket's faces.
-pub fn read_bucket(bucket: &Bucket) -> io::Result<Vec<[u32; 3]>> {
+/// Loads a bucket's faces, and their face-file indices if it was written `indexed`.
+pub fn read_bucket(bucket: &Bucket, indexed: bool) -> io::Result<(Vec<[u32; 3]>, Vec<u32>)> {
     let bytes = std::fs::read(&bucket.path)?;
-    Ok(bytemuck::pod_collect_to_vec(
-        &bytes[..bytes.len() / 12 * 12],
+    if !indexed {
+        return Ok((
+            bytemuck::pod_collect_to_vec(&bytes[..bytes.len() / 12 * 12]),
+            Vec::new(),
+        ));
+    }
+    let records: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..bytes.len() / 16 * 16]);
+    Ok((
+        records.iter().map(|r| [r[0], r[1], r[2]]).collect(),
+        records.iter().map(|r| r[3]).collect(),
     ))
 }
 

@@ -13,17 +13,18 @@
 //! patches live in scratch files between levels, and only a bucket or a group per worker is
 //! in memory at a time.
 
+use super::atlas::{self, PatchTexture, Resampled, SourceColors};
 use super::bounds::{Sphere, merge_spheres, normal_cone, sphere_of_points};
 use super::buckets::{KdSplit, read_bucket, write_buckets};
 use super::codec::{self, Grid, PatchRef};
 use super::format::{
-    GroupRecord, HAS_COLORS, HAS_NORMALS, Header, NO_GROUP, NodeRecord, TableWriter,
+    GroupRecord, HAS_COLORS, HAS_NORMALS, HAS_TEXTURE, Header, NO_GROUP, NodeRecord, TableWriter,
 };
 use super::grouping::{PatchOutline, group_patches};
 use super::ingest::{Ingest, Ingested};
 use super::patch::{BuildPatch, ScratchFile, edge_ends};
-use super::simplify::{merge, simplify_group, split};
-use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink};
+use super::simplify::{merge, simplify_group, split_tracked};
+use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink, SourceTexture, TexturedFace};
 use crate::progress::Progress;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap as HashMap;
@@ -49,6 +50,8 @@ pub struct BuildOptions {
     pub zstd_level: i32,
     /// Patches per group.
     pub group_size: usize,
+    /// JPEG quality (1–100) of the patches' texture atlases (textured scans).
+    pub texture_quality: u8,
 }
 
 impl Default for BuildOptions {
@@ -60,6 +63,7 @@ impl Default for BuildOptions {
             scratch_dir: None,
             zstd_level: 19,
             group_size: 8,
+            texture_quality: 85,
         }
     }
 }
@@ -246,6 +250,11 @@ struct Node {
     parent_sphere: Sphere,
     parent_error: f32,
     member_of: u32,
+    /// The patch's atlas in the texture scratch file (length 0: none).
+    tex_offset: u64,
+    tex_len: u32,
+    /// Vertices of the encoded patch (more than `vertices` where atlas charts meet).
+    encoded_vertices: u32,
 }
 
 struct Group {
@@ -268,6 +277,9 @@ struct Stored {
     bounds: Sphere,
     cone: [f32; 4],
     outline: PatchOutline,
+    tex_offset: u64,
+    tex_len: u32,
+    encoded_vertices: u32,
 }
 
 /// What a group step returns: its errors and stored products, or `None` when the group could
@@ -293,6 +305,9 @@ struct Builder<'a> {
     progress: &'a dyn Progress,
     raw: ScratchFile,
     blobs: ScratchFile,
+    /// Every patch's atlas, for the level above to resample (textured scans).
+    atlases: ScratchFile,
+    textured: bool,
     grid: Grid,
     /// Exact bounds of the input vertices.
     bounds: ([f32; 3], [f32; 3]),
@@ -321,6 +336,8 @@ impl<'a> Builder<'a> {
             progress,
             raw: ScratchFile::create(&scratch.join("patches.raw"))?,
             blobs: ScratchFile::create(&scratch.join("patches.blobs"))?,
+            atlases: ScratchFile::create(&scratch.join("patches.atlases"))?,
+            textured: ingested.face_uvs.is_some(),
             grid,
             bounds: (ingested.bbox.0.into(), ingested.bbox.1.into()),
             nodes: Vec::new(),
@@ -382,25 +399,42 @@ impl<'a> Builder<'a> {
 
     /// Encodes a patch and appends it to both scratch files. Interior vertices are stored at
     /// `2^shift` grid units (0 for leaves).
-    fn store(&self, patch: &BuildPatch, shift: u32) -> io::Result<Stored> {
+    fn store(
+        &self,
+        patch: &BuildPatch,
+        shift: u32,
+        texture: Option<&PatchTexture>,
+    ) -> io::Result<Stored> {
         let raw = patch.to_bytes();
         let raw_offset = self.raw.append(&raw)?;
+        let (tex_offset, tex_len, jpeg) = match texture {
+            Some(t) => {
+                let bytes = atlas_to_bytes(t);
+                let offset = self.atlases.append(&bytes)?;
+                let jpeg = atlas::encode_jpeg(&t.image, self.options.texture_quality);
+                (offset, bytes.len() as u32, Some(jpeg))
+            }
+            None => (0, 0, None),
+        };
         let grid_positions: Vec<[u32; 3]> = patch
             .positions
             .iter()
             .map(|&p| self.grid.quantize(p))
             .collect();
-        let blob = codec::encode(
-            &PatchRef {
-                grid_positions: &grid_positions,
-                colors: (!patch.colors.is_empty()).then_some(&patch.colors[..]),
-                normals: (!patch.normals.is_empty()).then_some(&patch.normals[..]),
-                original_ids: &patch.ids,
-                indices: &patch.indices,
-                shift,
+        let patch_ref = PatchRef {
+            grid_positions: &grid_positions,
+            colors: (!patch.colors.is_empty()).then_some(&patch.colors[..]),
+            normals: (!patch.normals.is_empty()).then_some(&patch.normals[..]),
+            original_ids: &patch.ids,
+            indices: &patch.indices,
+            shift,
+            texture: match (texture, &jpeg) {
+                (Some(t), Some(j)) => Some((&t.uvs[..], &j[..])),
+                _ => None,
             },
-            self.options.zstd_level,
-        );
+        };
+        let blob = codec::encode(&patch_ref, self.options.zstd_level);
+        let encoded_vertices = codec::encoded_vertex_count(&patch_ref) as u32;
         let blob_offset = self.blobs.append(&blob)?;
         let border = patch.border_edges();
         Ok(Stored {
@@ -414,7 +448,19 @@ impl<'a> Builder<'a> {
             bounds: sphere_of_points(patch.positions.iter()),
             cone: normal_cone(&patch.positions, &patch.indices),
             outline: outline(patch, &border),
+            tex_offset,
+            tex_len,
+            encoded_vertices,
         })
+    }
+
+    /// A stored patch's atlas.
+    fn load_atlas(&self, node: u32) -> io::Result<Option<PatchTexture>> {
+        let n = &self.nodes[node as usize];
+        if n.tex_len == 0 {
+            return Ok(None);
+        }
+        atlas_from_bytes(&self.atlases.read(n.tex_offset, n.tex_len as usize)?).map(Some)
     }
 
     /// Original IDs of a stored patch (the head of its scratch record), without the rest.
@@ -459,6 +505,9 @@ impl<'a> Builder<'a> {
             parent_sphere: lod_sphere,
             parent_error: f32::INFINITY,
             member_of: NO_GROUP,
+            tex_offset: s.tex_offset,
+            tex_len: s.tex_len,
+            encoded_vertices: s.encoded_vertices,
         });
         id
     }
@@ -488,6 +537,7 @@ impl<'a> Builder<'a> {
             &kd,
             scratch,
             self.options.memory_budget / 16,
+            self.textured,
         )?;
         let _ = std::fs::remove_file(&ingested.faces_path);
         ingested.positions.release();
@@ -497,6 +547,8 @@ impl<'a> Builder<'a> {
         let positions = arrays.positions.as_slice();
         let normals = arrays.normals.as_slice();
         let colors = arrays.colors.as_ref().map(|c| c.as_slice());
+        let face_uvs = arrays.face_uvs.as_ref().map(|f| f.as_slice());
+        let textures = &arrays.textures[..];
         let max = self.options.max_patch_triangles;
         let this = &*self;
         let workers = rayon::ThreadPoolBuilder::new()
@@ -510,7 +562,7 @@ impl<'a> Builder<'a> {
                     if this.progress.cancelled() {
                         return Err(BuildError::Cancelled);
                     }
-                    let faces = read_bucket(bucket)?;
+                    let (faces, face_ids) = read_bucket(bucket, this.textured)?;
                     let _ = std::fs::remove_file(&bucket.path);
                     let mesh = bucket_mesh(&faces, positions, normals, colors);
                     drop(faces);
@@ -520,10 +572,25 @@ impl<'a> Builder<'a> {
                     if let Some(c) = &arrays.colors {
                         c.release();
                     }
-                    let patches = split(&mesh, &mesh.indices, max);
+                    let patches = split_tracked(&mesh, &mesh.indices, max);
                     let stored = patches
                         .iter()
-                        .map(|p| this.store(p, 0))
+                        .map(|(p, tris)| {
+                            let texture = face_uvs.map(|uvs| {
+                                let faces: Vec<TexturedFace> = tris
+                                    .iter()
+                                    .map(|&t| {
+                                        face_ids
+                                            .get(t as usize)
+                                            .and_then(|&f| uvs.get(f as usize))
+                                            .copied()
+                                            .unwrap_or(TexturedFace::NONE)
+                                    })
+                                    .collect();
+                                leaf_atlas(p, &faces, textures)
+                            });
+                            this.store(p, 0, texture.as_ref())
+                        })
                         .collect::<io::Result<Vec<_>>>()?;
                     this.progress.advance(1);
                     Ok(stored)
@@ -546,6 +613,7 @@ impl<'a> Builder<'a> {
             }
         }
         self.raw.flush()?;
+        self.atlases.flush()?;
         Ok(pool)
     }
 
@@ -613,7 +681,14 @@ impl<'a> Builder<'a> {
                             *c = c.saturating_add(1);
                         }
                     }
-                    drop(patches);
+                    let member_atlases = if this.textured {
+                        members
+                            .iter()
+                            .map(|&m| this.load_atlas(pool_ref[m].node))
+                            .collect::<io::Result<Vec<_>>>()?
+                    } else {
+                        Vec::new()
+                    };
                     let shared_outside =
                         |id: u32| inside.get(&id).is_some_and(|&c| uses[id as usize] > c);
                     let outcome = match simplify_group(&merged, &shared_outside, max) {
@@ -638,10 +713,17 @@ impl<'a> Builder<'a> {
                                 geometric,
                                 stored: (geometric as f64 + quantisation) as f32,
                             };
+                            let textures = coarse_atlases(
+                                &step.products,
+                                &patches,
+                                &member_atlases,
+                                errors.stored,
+                            );
                             let stored = step
                                 .products
                                 .iter()
-                                .map(|p| this.store(p, shift))
+                                .zip(&textures)
+                                .map(|(p, t)| this.store(p, shift, t.as_ref()))
                                 .collect::<io::Result<Vec<_>>>()?;
                             Some((errors, stored))
                         }
@@ -697,6 +779,7 @@ impl<'a> Builder<'a> {
                 }
             }
             self.raw.flush()?;
+            self.atlases.flush()?;
             let next_tris: u64 = next
                 .iter()
                 .map(|p| self.nodes[p.node as usize].triangles as u64)
@@ -747,7 +830,7 @@ impl<'a> Builder<'a> {
                     blob_len: n.blob_len,
                     blob_crc: n.blob_crc,
                     triangle_count: n.triangles,
-                    vertex_count: n.vertices,
+                    vertex_count: n.encoded_vertices,
                     level: n.level,
                     bounds: n.bounds,
                     cone: n.cone,
@@ -788,6 +871,9 @@ impl<'a> Builder<'a> {
         if import.has_colors {
             flags |= HAS_COLORS;
         }
+        if self.textured {
+            flags |= HAS_TEXTURE;
+        }
         let header = Header {
             flags,
             level_count: self.nodes.iter().map(|n| n.level).max().unwrap_or(0) + 1,
@@ -820,6 +906,102 @@ impl<'a> Builder<'a> {
         })?;
         Ok(written)
     }
+}
+
+/// A leaf's atlas, cut from the scan's textures at their own resolution.
+fn leaf_atlas(
+    patch: &BuildPatch,
+    faces: &[TexturedFace],
+    textures: &[SourceTexture],
+) -> PatchTexture {
+    let texel = atlas::source_texel_size(&patch.positions, &patch.indices, faces, textures)
+        .unwrap_or_else(|| fallback_texel_size(patch));
+    let layout = atlas::layout(&patch.positions, &patch.indices, texel);
+    let source = SourceColors {
+        indices: &patch.indices,
+        colors: &patch.colors,
+        faces,
+        textures,
+    };
+    atlas::bake(&layout, &source, false)
+}
+
+/// Texel size of a patch without source texture: about eight texels per triangle.
+fn fallback_texel_size(patch: &BuildPatch) -> f32 {
+    let p = |i: u32| glam::Vec3::from(patch.positions[i as usize]);
+    let area: f32 = patch
+        .indices
+        .chunks_exact(3)
+        .map(|t| (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])).length() * 0.5)
+        .sum();
+    (area / patch.triangle_count().max(1) as f32 / 8.0)
+        .sqrt()
+        .max(1e-12)
+}
+
+/// Atlases of a group's products, resampled from its members' (none when the members have
+/// none). Texels are as large as the products' error (a patch is drawn while its error is
+/// at most a pixel) but never finer than the members'.
+fn coarse_atlases(
+    products: &[BuildPatch],
+    members: &[BuildPatch],
+    member_atlases: &[Option<PatchTexture>],
+    error: f32,
+) -> Vec<Option<PatchTexture>> {
+    if member_atlases.is_empty() || member_atlases.iter().any(|a| a.is_none()) {
+        return products.iter().map(|_| None).collect();
+    }
+    let finer: Vec<&PatchTexture> = member_atlases.iter().flatten().collect();
+    let finest = finer
+        .iter()
+        .map(|a| a.texel_size)
+        .fold(f32::INFINITY, f32::min);
+    let texel = error.max(finest);
+    let surfaces: Vec<(&[[f32; 3]], &[u32])> = members
+        .iter()
+        .map(|m| (&m.positions[..], &m.indices[..]))
+        .collect();
+    products
+        .iter()
+        .map(|p| {
+            let layout = atlas::layout(&p.positions, &p.indices, texel);
+            let source = Resampled::new(&p.positions, &p.indices, &surfaces, &finer);
+            Some(atlas::bake(&layout, &source, true))
+        })
+        .collect()
+}
+
+/// Scratch form of an atlas (native layout; never leaves the build machine).
+fn atlas_to_bytes(t: &PatchTexture) -> Vec<u8> {
+    let mut out = Vec::with_capacity(16 + t.image.texels().len() * 4 + t.uvs.len() * 8);
+    out.extend_from_slice(&t.image.width().to_le_bytes());
+    out.extend_from_slice(&t.image.height().to_le_bytes());
+    out.extend_from_slice(&t.texel_size.to_le_bytes());
+    out.extend_from_slice(&(t.uvs.len() as u32).to_le_bytes());
+    out.extend_from_slice(bytemuck::cast_slice(t.image.texels()));
+    out.extend_from_slice(bytemuck::cast_slice(&t.uvs));
+    out
+}
+
+fn atlas_from_bytes(bytes: &[u8]) -> io::Result<PatchTexture> {
+    let bad = || io::Error::new(io::ErrorKind::InvalidData, "corrupt scratch atlas");
+    let word = |i: usize| -> io::Result<[u8; 4]> {
+        let b = bytes.get(i * 4..i * 4 + 4).ok_or_else(bad)?;
+        Ok([b[0], b[1], b[2], b[3]])
+    };
+    let (w, h) = (u32::from_le_bytes(word(0)?), u32::from_le_bytes(word(1)?));
+    let texel_size = f32::from_le_bytes(word(2)?);
+    let n = u32::from_le_bytes(word(3)?) as usize;
+    let texels_end = 16 + w as usize * h as usize * 4;
+    let texels = bytes.get(16..texels_end).ok_or_else(bad)?;
+    let uvs = bytes.get(texels_end..texels_end + n * 8).ok_or_else(bad)?;
+    let image =
+        mesh::Texture::from_texels(w, h, bytemuck::pod_collect_to_vec(texels)).ok_or_else(bad)?;
+    Ok(PatchTexture {
+        image,
+        uvs: bytemuck::pod_collect_to_vec(uvs),
+        texel_size,
+    })
 }
 
 /// Gathers a bucket's faces into a compact mesh (local indices, original IDs kept).

@@ -16,6 +16,12 @@
 //!   gets the same bits); border vertices additionally store the difference between their
 //!   scan normal and that prediction in octahedral coordinates (8 bits), so shading matches
 //!   across patch borders while interior normals follow the geometry at that level.
+//! - Textured patches (issue 11): every vertex has one texture coordinate in the patch's own
+//!   atlas, so a vertex where the atlas' charts meet is stored once per chart (the same
+//!   original ID and grid position each time: such copies sit on chart-border edges, which
+//!   count as patch border, so they keep full precision and stored normals and decode to the
+//!   same point). Coordinates are u16 pairs through meshoptimizer's vertex codec; the atlas
+//!   image (JPEG) travels in front of the compressed payload, as it is compressed already.
 //! - The whole payload is compressed with zstd.
 
 use meshopt::{
@@ -31,6 +37,9 @@ const COMPRESSION_NONE: u8 = 0;
 const COMPRESSION_ZSTD: u8 = 1;
 const FLAG_COLORS: u32 = 1;
 const FLAG_NORMALS: u32 = 2;
+const FLAG_UVS: u32 = 4;
+/// Blob header flag (byte 5): an image section follows the 12-byte header.
+const BLOB_IMAGE: u8 = 1;
 const PAYLOAD_HEADER: usize = 52;
 /// Octahedral normal quantisation: components in `-OCT_SCALE..=OCT_SCALE` (8 bits).
 pub const OCT_SCALE: f64 = 127.0;
@@ -197,6 +206,11 @@ pub struct Patch {
     pub indices: Vec<u32>,
     /// Grid coordinates of the vertices (exact; `positions` are their world values).
     pub grid_positions: Vec<[u32; 3]>,
+    /// Texture coordinates in [`Patch::image`] (empty when the patch has no texture): `v = 0`
+    /// is the image's top row.
+    pub uvs: Vec<[f32; 2]>,
+    /// The patch's atlas (JPEG), when it has one.
+    pub image: Option<Vec<u8>>,
 }
 
 /// Input of [`encode`]: a patch with positions already on the grid.
@@ -208,6 +222,66 @@ pub struct PatchRef<'a> {
     pub indices: &'a [u32],
     /// Interior vertices are stored at `2^shift` grid units (0 = full precision).
     pub shift: u32,
+    /// The patch's texture: every corner's coordinates (three per triangle, in [0, 1]) and
+    /// the atlas image (JPEG).
+    pub texture: Option<(&'a [[f32; 2]], &'a [u8])>,
+}
+
+/// Quantised texture coordinate: `round(x × 65535)` of `x` clamped to [0, 1].
+fn quantize_uv(uv: [f32; 2]) -> [u16; 2] {
+    uv.map(|x| {
+        let x = if x.is_finite() {
+            x.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (x * 65535.0 + 0.5) as u16
+    })
+}
+
+/// Splits the vertices of a textured patch into one vertex per (vertex, texture coordinate):
+/// new grid positions, colours, normals, ids, indices and coordinates.
+#[allow(clippy::type_complexity)]
+fn split_wedges(
+    patch: &PatchRef<'_>,
+    corner_uvs: &[[f32; 2]],
+) -> (
+    Vec<[u32; 3]>,
+    Option<Vec<[u8; 4]>>,
+    Option<Vec<[f32; 3]>>,
+    Vec<u32>,
+    Vec<u32>,
+    Vec<[u16; 2]>,
+) {
+    let mut map: HashMap<(u32, [u16; 2]), u32> = HashMap::default();
+    let mut from: Vec<u32> = Vec::new();
+    let mut uvs: Vec<[u16; 2]> = Vec::new();
+    let indices: Vec<u32> = patch
+        .indices
+        .iter()
+        .enumerate()
+        .map(|(c, &v)| {
+            let q = quantize_uv(corner_uvs.get(c).copied().unwrap_or([0.0; 2]));
+            *map.entry((v, q)).or_insert_with(|| {
+                from.push(v);
+                uvs.push(q);
+                (from.len() - 1) as u32
+            })
+        })
+        .collect();
+    let pick = |v: &u32| *v as usize;
+    (
+        from.iter().map(|v| patch.grid_positions[pick(v)]).collect(),
+        patch
+            .colors
+            .map(|c| from.iter().map(|v| c[pick(v)]).collect()),
+        patch
+            .normals
+            .map(|n| from.iter().map(|v| n[pick(v)]).collect()),
+        from.iter().map(|v| patch.original_ids[pick(v)]).collect(),
+        indices,
+        uvs,
+    )
 }
 
 /// Why a blob does not decode.
@@ -362,6 +436,48 @@ fn get_varint(bytes: &[u8], at: &mut usize) -> Result<i64, CodecError> {
 /// Encodes a patch. Reorders vertices and triangles for cache efficiency and compression,
 /// which changes nothing a reader relies on: every vertex keeps its original ID.
 pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
+    let Some((corner_uvs, image)) = patch.texture else {
+        return encode_split(patch, None, zstd_level);
+    };
+    let (grid, colors, normals, ids, indices, uvs) = split_wedges(patch, corner_uvs);
+    encode_split(
+        &PatchRef {
+            grid_positions: &grid,
+            colors: colors.as_deref(),
+            normals: normals.as_deref(),
+            original_ids: &ids,
+            indices: &indices,
+            shift: patch.shift,
+            texture: None,
+        },
+        Some((&uvs, image)),
+        zstd_level,
+    )
+}
+
+/// Vertices a patch has once split at its texture's chart borders (its decoded vertex count).
+pub fn encoded_vertex_count(patch: &PatchRef<'_>) -> usize {
+    match patch.texture {
+        None => patch.grid_positions.len(),
+        Some((corner_uvs, _)) => {
+            let mut seen: rustc_hash::FxHashSet<(u32, [u16; 2])> = Default::default();
+            for (c, &v) in patch.indices.iter().enumerate() {
+                seen.insert((
+                    v,
+                    quantize_uv(corner_uvs.get(c).copied().unwrap_or([0.0; 2])),
+                ));
+            }
+            seen.len()
+        }
+    }
+}
+
+/// [`encode`] of a patch whose vertices are already one per texture coordinate (`uvs[v]`).
+fn encode_split(
+    patch: &PatchRef<'_>,
+    texture: Option<(&[[u16; 2]], &[u8])>,
+    zstd_level: i32,
+) -> Vec<u8> {
     let vertex_count = patch.grid_positions.len();
     let mut indices = meshopt::optimize_vertex_cache(patch.indices, vertex_count);
     let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertex_count);
@@ -373,12 +489,16 @@ pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
     let mut ids = vec![0u32; used];
     let mut colors = patch.colors.map(|_| vec![[0f32; 4]; used]);
     let mut normals = patch.normals.map(|_| vec![[0f32; 3]; used]);
+    let mut uvs = texture.map(|_| vec![[0u16; 2]; used]);
     for (old, &new) in remap.iter().enumerate() {
         if new == u32::MAX {
             continue;
         }
         let new = new as usize;
         grid[new] = patch.grid_positions[old];
+        if let (Some(dst), Some((src, _))) = (uvs.as_mut(), texture) {
+            dst[new] = src[old];
+        }
         ids[new] = patch.original_ids[old];
         if let (Some(dst), Some(src)) = (colors.as_mut(), patch.colors) {
             let c = src[old];
@@ -450,9 +570,17 @@ pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
         }
     }
 
+    let uv_stream = uvs
+        .as_ref()
+        .map(|u| encode_vertex_buffer(u).unwrap_or_default())
+        .unwrap_or_default();
+
     let mut flags = 0;
     if colors.is_some() {
         flags |= FLAG_COLORS;
+    }
+    if uvs.is_some() {
+        flags |= FLAG_UVS;
     }
 
     if normals.is_some() {
@@ -464,6 +592,7 @@ pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
         &id_stream,
         &color_stream,
         &normal_stream,
+        &uv_stream,
     ];
     let mut payload =
         Vec::with_capacity(PAYLOAD_HEADER + streams.iter().map(|s| s.len()).sum::<usize>());
@@ -481,7 +610,6 @@ pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
     for s in &streams {
         payload.extend_from_slice(&(s.len() as u32).to_le_bytes());
     }
-    payload.extend_from_slice(&0u32.to_le_bytes());
     for s in &streams {
         payload.extend_from_slice(s);
     }
@@ -491,10 +619,16 @@ pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
             Some(Ok(c)) if c.len() < payload.len() => (COMPRESSION_ZSTD, c),
             _ => (COMPRESSION_NONE, payload.clone()),
         };
-    let mut blob = Vec::with_capacity(12 + body.len());
+    let image = texture.map(|(_, image)| image);
+    let mut blob = Vec::with_capacity(16 + image.map_or(0, |i| i.len()) + body.len());
     blob.extend_from_slice(&BLOB_MAGIC);
-    blob.extend_from_slice(&[compression, 0, 0, 0]);
+    let blob_flags = if image.is_some() { BLOB_IMAGE } else { 0 };
+    blob.extend_from_slice(&[compression, blob_flags, 0, 0]);
     blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    if let Some(image) = image {
+        blob.extend_from_slice(&(image.len() as u32).to_le_bytes());
+        blob.extend_from_slice(image);
+    }
     blob.extend_from_slice(&body);
     blob
 }
@@ -535,9 +669,17 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     if payload_len > (64 << 20).min(payload_bound(max_triangles)) {
         return Err(CodecError::Sizes);
     }
+    let (image, body) = if blob[5] & BLOB_IMAGE != 0 {
+        let len = u32_at(blob, 12)? as usize;
+        let end = 16usize.checked_add(len).ok_or(CodecError::Truncated)?;
+        let image = blob.get(16..end).ok_or(CodecError::Truncated)?;
+        (Some(image.to_vec()), &blob[end..])
+    } else {
+        (None, &blob[12..])
+    };
     let payload = match blob[4] {
-        COMPRESSION_NONE => blob[12..].to_vec(),
-        COMPRESSION_ZSTD => zstd::bulk::decompress(&blob[12..], payload_len)
+        COMPRESSION_NONE => body.to_vec(),
+        COMPRESSION_ZSTD => zstd::bulk::decompress(body, payload_len)
             .map_err(|e| CodecError::Zstd(e.to_string()))?,
         other => return Err(CodecError::Compression(other)),
     };
@@ -560,7 +702,7 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         u32_at(&payload, 20)?,
         u32_at(&payload, 24)?,
     ];
-    let mut lens = [0usize; 5];
+    let mut lens = [0usize; 6];
     for (i, l) in lens.iter_mut().enumerate() {
         *l = u32_at(&payload, 28 + 4 * i)? as usize;
     }
@@ -572,12 +714,13 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         at += len;
         Ok(s)
     };
-    let (idx_s, pos_s, ids_s, col_s, nor_s) = (
+    let (idx_s, pos_s, ids_s, col_s, nor_s, uv_s) = (
         next(lens[0])?,
         next(lens[1])?,
         next(lens[2])?,
         next(lens[3])?,
         next(lens[4])?,
+        next(lens[5])?,
     );
     let n = vertex_count as usize;
     // Necessary for any valid blob, and what bounds the allocations below by the blob's own
@@ -658,6 +801,13 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     } else {
         Vec::new()
     };
+    let uvs = if flags & FLAG_UVS != 0 {
+        let q: Vec<[u16; 2]> =
+            decode_vertex_buffer(uv_s, n).map_err(|_| CodecError::Stream("uvs"))?;
+        q.iter().map(|q| q.map(|x| x as f32 / 65535.0)).collect()
+    } else {
+        Vec::new()
+    };
     Ok(Patch {
         positions,
         colors,
@@ -665,6 +815,8 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         original_ids,
         indices,
         grid_positions,
+        uvs,
+        image,
     })
 }
 
@@ -785,6 +937,97 @@ mod tests {
     }
 
     #[test]
+    fn textured_roundtrip_splits_vertices_at_chart_borders_only() {
+        let (grid, gp, ids, colors, normals, indices) = sheet();
+        // Two charts: the left and right halves of the sheet (x < 6 and x >= 6), each with
+        // its own coordinates, so the column x = 6 is split.
+        let corner_uvs: Vec<[f32; 2]> = indices
+            .chunks_exact(3)
+            .flat_map(|t| {
+                let right = t.iter().map(|&v| v % 12).min().unwrap_or(0) >= 6;
+                t.iter()
+                    .map(move |&v| {
+                        let (x, y) = ((v % 12) as f32, (v / 12) as f32);
+                        if right {
+                            [0.55 + (x - 6.0) / 12.0, y / 12.0]
+                        } else {
+                            [x / 12.0, y / 12.0]
+                        }
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let image = vec![0xFFu8, 0xD8, 1, 2, 3];
+        let patch = PatchRef {
+            grid_positions: &gp,
+            colors: Some(&colors),
+            normals: Some(&normals),
+            original_ids: &ids,
+            indices: &indices,
+            shift: 3,
+            texture: Some((&corner_uvs, &image)),
+        };
+        let blob = encode(&patch, 3);
+        let p = decode(&blob, &grid).expect("decodes");
+        assert_eq!(p.image.as_deref(), Some(&image[..]));
+        // One extra vertex per row on the chart border (x = 6 belongs to both halves).
+        assert_eq!(p.positions.len(), 12 * 12 + 12);
+        assert_eq!(encoded_vertex_count(&patch), p.positions.len());
+        assert_eq!(p.uvs.len(), p.positions.len());
+        for (k, &v) in p.indices.iter().enumerate() {
+            let id = p.original_ids[v as usize];
+            let local = ids.iter().position(|&i| i == id).expect("an input id") as u32;
+            // Copies of a vertex decode to the same grid position, near the input one.
+            let copies: Vec<[u32; 3]> = (0..p.positions.len())
+                .filter(|&w| p.original_ids[w] == id)
+                .map(|w| p.grid_positions[w])
+                .collect();
+            assert!(copies.iter().all(|&g| g == copies[0]), "{copies:?}");
+            for k in 0..3 {
+                assert!((copies[0][k] as i64 - gp[local as usize][k] as i64).abs() <= 8);
+            }
+            let (x, y) = ((local % 12) as f32, (local / 12) as f32);
+            let tri = &p.indices[k / 3 * 3..k / 3 * 3 + 3];
+            let right = tri
+                .iter()
+                .map(|&w| {
+                    ids.iter()
+                        .position(|&i| i == p.original_ids[w as usize])
+                        .unwrap_or(0)
+                        % 12
+                })
+                .min()
+                .unwrap_or(0)
+                >= 6;
+            let want = if right {
+                [0.55 + (x - 6.0) / 12.0, y / 12.0]
+            } else {
+                [x / 12.0, y / 12.0]
+            };
+            let got = p.uvs[v as usize];
+            assert!((got[0] - want[0]).abs() < 1e-4 && (got[1] - want[1]).abs() < 1e-4);
+        }
+        // Untextured blobs have neither.
+        let plain = decode(
+            &encode(
+                &PatchRef {
+                    texture: None,
+                    ..patch
+                },
+                3,
+            ),
+            &grid,
+        )
+        .expect("decodes");
+        assert!(plain.uvs.is_empty() && plain.image.is_none());
+        assert_eq!(plain.positions.len(), 144);
+        // A declared image longer than the blob is refused.
+        let mut bad = blob.clone();
+        bad[12..16].copy_from_slice(&(blob.len() as u32).to_le_bytes());
+        assert!(decode(&bad, &grid).is_err());
+    }
+
+    #[test]
     fn roundtrip_is_exact_at_full_precision() {
         let (grid, gp, ids, colors, normals, indices) = sheet();
         let blob = encode(
@@ -795,6 +1038,7 @@ mod tests {
                 original_ids: &ids,
                 indices: &indices,
                 shift: 0,
+                texture: None,
             },
             3,
         );
@@ -846,6 +1090,7 @@ mod tests {
                 original_ids: &ids,
                 indices: &indices,
                 shift,
+                texture: None,
             },
             3,
         );
@@ -901,6 +1146,7 @@ mod tests {
                 original_ids: &ids,
                 indices: &indices,
                 shift: 2,
+                texture: None,
             },
             0,
         );

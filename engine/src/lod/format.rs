@@ -27,6 +27,8 @@ pub const NO_GROUP: u32 = u32::MAX;
 /// Header flags.
 pub const HAS_COLORS: u32 = 1;
 pub const HAS_NORMALS: u32 = 2;
+/// Every patch carries a texture atlas (`docs/FORMAT.md`, patch blob).
+pub const HAS_TEXTURE: u32 = 4;
 
 /// Fixed-size file header.
 #[repr(C)]
@@ -315,6 +317,11 @@ impl LodFile {
 
     pub fn has_normals(&self) -> bool {
         self.header.flags & HAS_NORMALS != 0
+    }
+
+    /// Whether every patch carries a texture atlas.
+    pub fn has_texture(&self) -> bool {
+        self.header.flags & HAS_TEXTURE != 0
     }
 
     /// The whole file (for serving byte ranges).

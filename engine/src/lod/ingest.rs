@@ -4,7 +4,7 @@
 //! normals when the scan has none, and the mean edge length for the quantisation step.
 
 use super::spill::SpillVec;
-use crate::mesh::{ImportError, MeshSink, SourceInfo, VertexBatch};
+use crate::mesh::{ImportError, MeshSink, SourceInfo, SourceTexture, TexturedFace, VertexBatch};
 use glam::Vec3;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -21,6 +21,10 @@ pub struct Ingested {
     pub normals: SpillVec<[f32; 3]>,
     pub faces_path: PathBuf,
     pub triangle_count: u64,
+    /// The scan's textures, and every face's texture coordinates (face order), when the
+    /// reader handed over textures.
+    pub textures: Vec<SourceTexture>,
+    pub face_uvs: Option<SpillVec<TexturedFace>>,
     pub bbox: (Vec3, Vec3),
     pub sample: Vec<[f32; 3]>,
     pub mean_edge: f64,
@@ -34,6 +38,8 @@ pub struct Ingest {
     normals_from_input: bool,
     faces: BufWriter<File>,
     faces_path: PathBuf,
+    textures: Vec<SourceTexture>,
+    face_uvs: Option<SpillVec<TexturedFace>>,
     memory_limit: usize,
     triangle_count: u64,
     lo: Vec3,
@@ -61,6 +67,8 @@ impl Ingest {
             normals_from_input: false,
             faces: BufWriter::with_capacity(1 << 20, File::create(&faces_path)?),
             faces_path,
+            textures: Vec::new(),
+            face_uvs: None,
             memory_limit,
             triangle_count: 0,
             lo: Vec3::splat(f32::MAX),
@@ -107,6 +115,8 @@ impl Ingest {
             normals: self.normals,
             faces_path: self.faces_path,
             triangle_count: self.triangle_count,
+            textures: self.textures,
+            face_uvs: self.face_uvs,
             bbox,
             sample: self.sample,
             mean_edge: if self.edge_count > 0 {
@@ -178,7 +188,59 @@ impl MeshSink for Ingest {
         Ok(())
     }
 
+    fn texture(&mut self, texture: SourceTexture) -> Result<(), ImportError> {
+        let decoded: u64 =
+            self.textures.iter().map(|t| t.image.bytes()).sum::<u64>() + texture.image.bytes();
+        // Textures stay decoded for the leaf stage: they must fit the memory budget.
+        if decoded > (self.memory_limit as u64) * 2 {
+            return Err(ImportError::sink(format!(
+                "the scan's textures take {} MiB decoded, more than the build's memory                  budget allows; raise the budget (--memory-budget)",
+                decoded >> 20
+            )));
+        }
+        if self.triangle_count > 0 {
+            return Err(ImportError::sink(
+                "a texture arrived after the first triangle",
+            ));
+        }
+        self.textures.push(texture);
+        if self.face_uvs.is_none() {
+            self.face_uvs = Some(SpillVec::new(
+                self.faces_path.with_file_name("face_uvs.bin"),
+                self.memory_limit,
+            ));
+        }
+        Ok(())
+    }
+
+    fn textured_triangles(
+        &mut self,
+        triangles: &[[u32; 3]],
+        faces: &[TexturedFace],
+    ) -> Result<(), ImportError> {
+        if faces.len() != triangles.len() {
+            return Err(ImportError::sink(
+                "texture coordinates for a different face count",
+            ));
+        }
+        let before = self.triangle_count;
+        self.triangles(triangles)?;
+        if let Some(uvs) = self.face_uvs.as_mut() {
+            // `triangles` succeeded for all of them: faces and coordinates stay aligned.
+            debug_assert_eq!(uvs.len() as u64, before);
+            uvs.extend_from_slice(faces).map_err(io_error)?;
+        }
+        Ok(())
+    }
+
     fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
+        if let Some(uvs) = self.face_uvs.as_mut()
+            && uvs.len() as u64 != self.triangle_count
+        {
+            return Err(ImportError::sink(
+                "an untextured triangle in a textured scan",
+            ));
+        }
         let positions = self.positions.as_slice();
         let count = positions.len();
         let mut edge_sum = 0.0f64;

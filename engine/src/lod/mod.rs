@@ -4,6 +4,7 @@
 //! one; [`cut_uniform`] / [`cut_view`] choose the patches to draw; [`LodFile::patch`] decodes one;
 //! [`export_cut`] welds a cut into one mesh.
 
+pub mod atlas;
 pub mod bounds;
 mod buckets;
 pub mod build;
@@ -14,6 +15,7 @@ pub mod format;
 mod grouping;
 pub mod hausdorff;
 mod ingest;
+pub mod nearest;
 pub mod partition;
 pub mod patch;
 pub mod simplify;

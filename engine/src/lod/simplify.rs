@@ -481,6 +481,18 @@ fn border_locks(mesh: &BuildPatch, border: &[u64]) -> Vec<SimplifyVertex> {
 
 /// Splits simplified triangles (indexing `mesh`'s vertices) into compact patches.
 pub fn split(mesh: &BuildPatch, indices: &[u32], max_triangles: usize) -> Vec<BuildPatch> {
+    split_tracked(mesh, indices, max_triangles)
+        .into_iter()
+        .map(|(p, _)| p)
+        .collect()
+}
+
+/// [`split`], with each patch's triangles' indices in `indices` (in the patch's order).
+pub fn split_tracked(
+    mesh: &BuildPatch,
+    indices: &[u32],
+    max_triangles: usize,
+) -> Vec<(BuildPatch, Vec<u32>)> {
     let (parts, count) = partition(
         &Triangles {
             positions: &mesh.positions,
@@ -490,9 +502,11 @@ pub fn split(mesh: &BuildPatch, indices: &[u32], max_triangles: usize) -> Vec<Bu
         max_triangles,
     );
     let mut products: Vec<BuildPatch> = (0..count).map(|_| BuildPatch::default()).collect();
+    let mut sources: Vec<Vec<u32>> = vec![Vec::new(); count];
     let mut local: Vec<HashMap<u32, u32>> = vec![HashMap::default(); count];
     for (t, tri) in indices.chunks_exact(3).enumerate() {
         let p = parts[t] as usize;
+        sources[p].push(t as u32);
         let (patch, map) = (&mut products[p], &mut local[p]);
         for &v in tri {
             let li = *map.entry(v).or_insert_with(|| {
@@ -510,7 +524,7 @@ pub fn split(mesh: &BuildPatch, indices: &[u32], max_triangles: usize) -> Vec<Bu
             patch.indices.push(li);
         }
     }
-    products
+    products.into_iter().zip(sources).collect()
 }
 
 #[cfg(test)]

@@ -2,7 +2,8 @@
 //! size checks against the file length, a bounded line reader, tokens and numbers, welding.
 
 use super::{
-    ImportError, ImportErrorKind, ImportStats, Location, MeshSink, SourceInfo, VertexBatch,
+    ImportError, ImportErrorKind, ImportStats, Location, MeshSink, SourceInfo, SourceTexture,
+    TexturedFace, VertexBatch,
 };
 use crate::progress::Progress;
 use std::collections::HashMap;
@@ -94,6 +95,9 @@ pub(crate) struct Emitter<'a> {
     col: Vec<[u8; 4]>,
     nrm: Vec<[f32; 3]>,
     tris: Vec<[u32; 3]>,
+    /// Texture coordinates of `tris`, once the reader has handed over a texture.
+    faces: Vec<TexturedFace>,
+    textured: bool,
     reported: u64,
     /// Memory-mapped input whose consumed prefix is released as reading advances, so a
     /// multi-GB input never counts against the process's resident memory all at once.
@@ -125,6 +129,8 @@ impl<'a> Emitter<'a> {
             col: Vec::new(),
             nrm: Vec::new(),
             tris: Vec::new(),
+            faces: Vec::new(),
+            textured: false,
             reported: 0,
             map: None,
             released: 0,
@@ -151,6 +157,64 @@ impl<'a> Emitter<'a> {
         }
         self.tris.reserve(BATCH);
         self.sink.begin(info).map_err(|e| e.with_path(self.path))
+    }
+
+    /// Hands a texture to the sink (before the first triangle); from then on every triangle
+    /// carries texture coordinates ([`Emitter::textured_triangle`], or none).
+    pub fn texture(&mut self, texture: SourceTexture) -> Result<(), ImportError> {
+        self.textured = true;
+        self.stats.textures += 1;
+        self.sink
+            .texture(texture)
+            .map_err(|e| e.with_path(self.path))
+    }
+
+    /// Whether triangles carry texture coordinates.
+    pub fn textured(&self) -> bool {
+        self.textured
+    }
+
+    /// Queues a triangle with its corners' texture coordinates.
+    pub fn textured_triangle(
+        &mut self,
+        t: [u32; 3],
+        face: TexturedFace,
+    ) -> Result<(), ImportError> {
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            self.stats.degenerate_faces += 1;
+            return Ok(());
+        }
+        self.tris.push(t);
+        self.faces.push(face);
+        self.stats.triangles += 1;
+        if self.tris.len() >= BATCH {
+            self.flush_triangles()?;
+        }
+        Ok(())
+    }
+
+    /// [`Emitter::polygon`] with texture coordinates per corner (`uvs[k]` for `idx[k]`).
+    pub fn textured_polygon(
+        &mut self,
+        idx: &[u32],
+        uvs: &[[f32; 2]],
+        texture: u32,
+    ) -> Result<(), ImportError> {
+        if idx.len() < 3 || uvs.len() != idx.len() {
+            self.stats.degenerate_faces += 1;
+            return Ok(());
+        }
+        if idx.len() > 3 {
+            self.stats.polygons_triangulated += 1;
+        }
+        for k in 1..idx.len() - 1 {
+            let face = TexturedFace {
+                uv: [uvs[0], uvs[k], uvs[k + 1]],
+                texture,
+            };
+            self.textured_triangle([idx[0], idx[k], idx[k + 1]], face)?;
+        }
+        Ok(())
     }
 
     /// Vertices pushed so far (delivered or pending); the next vertex gets this ID.
@@ -184,6 +248,9 @@ impl<'a> Emitter<'a> {
             return Ok(());
         }
         self.tris.push(t);
+        if self.textured {
+            self.faces.push(TexturedFace::NONE);
+        }
         self.stats.triangles += 1;
         if self.tris.len() >= BATCH {
             self.flush_triangles()?;
@@ -242,10 +309,17 @@ impl<'a> Emitter<'a> {
         if self.tris.is_empty() {
             return Ok(());
         }
-        self.sink
-            .triangles(&self.tris)
-            .map_err(|e| e.with_path(self.path))?;
+        if self.textured {
+            self.sink
+                .textured_triangles(&self.tris, &self.faces)
+                .map_err(|e| e.with_path(self.path))?;
+        } else {
+            self.sink
+                .triangles(&self.tris)
+                .map_err(|e| e.with_path(self.path))?;
+        }
         self.tris.clear();
+        self.faces.clear();
         Ok(())
     }
 

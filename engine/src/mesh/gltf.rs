@@ -14,7 +14,10 @@
 
 use super::common::{BATCH, Emitter, Welder, err, map, open};
 use super::texture::{Texture, Wrap, encode_rgba};
-use super::{ImportError, ImportErrorKind as K, ImportStats, Location, MeshSink, SourceInfo};
+use super::{
+    ImportError, ImportErrorKind as K, ImportStats, Location, MeshSink, SourceInfo, SourceTexture,
+    TexturedFace,
+};
 use crate::progress::Progress;
 use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::mesh::{Mode, Semantic};
@@ -23,6 +26,7 @@ use glam::{Mat3, Mat4, Vec3};
 use std::collections::HashMap;
 use std::ops::Range;
 use std::path::{Component, Path, PathBuf};
+use std::sync::Arc;
 
 /// Reads a glTF or GLB file into `sink`.
 pub(crate) fn read(
@@ -89,7 +93,7 @@ pub(crate) fn read(
     }
 
     // Textures, decoded once each; what the sink will get; the amount of work.
-    let mut textures: HashMap<usize, Option<Texture>> = HashMap::new();
+    let mut textures: HashMap<usize, Option<Arc<Texture>>> = HashMap::new();
     let (mut has_colors, mut has_normals) = (false, false);
     let mut total: u64 = 0;
     for (prim, _) in &draws {
@@ -99,7 +103,7 @@ pub(crate) fn read(
             let image = tex.source().index();
             let loaded = textures
                 .entry(image)
-                .or_insert_with(|| load_image(&ctx, &doc, dir, image));
+                .or_insert_with(|| load_image(&ctx, &doc, dir, image).map(Arc::new));
             has_colors |= loaded.is_some();
         }
         has_colors |=
@@ -133,20 +137,52 @@ pub(crate) fn read(
         has_colors,
         has_normals,
     })?;
-    let mut welder = Welder::default();
-    let mut done: u64 = 0;
-    let mut remap: Vec<u32> = Vec::new();
-    for (prim, m) in &draws {
+    // Each (image, wrap modes) pair the primitives use is one texture of the sink, all handed
+    // over before the first triangle.
+    let mut handed: HashMap<(usize, Wrap, Wrap), u32> = HashMap::new();
+    let mut prim_textures = Vec::with_capacity(draws.len());
+    for (prim, _) in &draws {
         let texture = prim
             .material()
             .pbr_metallic_roughness()
             .base_color_texture()
             .and_then(|info| {
                 let tex = info.texture();
-                let t = textures.get(&tex.source().index())?.as_ref()?;
+                let image = tex.source().index();
+                let t = textures.get(&image)?.as_ref()?;
                 let s = tex.sampler();
-                Some((t, info.tex_coord(), wrap(s.wrap_s()), wrap(s.wrap_t())))
+                Some((
+                    t,
+                    info.tex_coord(),
+                    wrap(s.wrap_s()),
+                    wrap(s.wrap_t()),
+                    image,
+                ))
             });
+        prim_textures.push(match texture {
+            None => None,
+            Some((t, set, ws, wt, image)) => {
+                let id = match handed.get(&(image, ws, wt)) {
+                    Some(&id) => id,
+                    None => {
+                        let id = handed.len() as u32;
+                        em.texture(SourceTexture {
+                            image: t.clone(),
+                            wrap_s: ws,
+                            wrap_t: wt,
+                        })?;
+                        handed.insert((image, ws, wt), id);
+                        id
+                    }
+                };
+                Some((&**t, set, ws, wt, id))
+            }
+        });
+    }
+    let mut welder = Welder::default();
+    let mut done: u64 = 0;
+    let mut remap: Vec<u32> = Vec::new();
+    for ((prim, m), texture) in draws.iter().zip(prim_textures) {
         let p = Prim {
             work: &work,
             ctx: &ctx,
@@ -661,7 +697,8 @@ struct Prim<'a, 'd> {
     ctx: &'a Ctx<'a>,
     prim: &'a ::gltf::Primitive<'d>,
     m: Mat4,
-    texture: Option<(&'a Texture, u32, Wrap, Wrap)>,
+    /// Base colour texture: image, coordinate set, wrap modes, the sink's texture index.
+    texture: Option<(&'a Texture, u32, Wrap, Wrap, u32)>,
     has_colors: bool,
 }
 
@@ -752,7 +789,7 @@ impl Prim<'_, '_> {
                         *ck *= if k < a.dims { a.f(i, k) } else { 1.0 };
                     }
                 }
-                if let (Some((tex, _, ws, wt)), Some(uv)) = (self.texture, &uvs) {
+                if let (Some((tex, _, ws, wt, _)), Some(uv)) = (self.texture, &uvs) {
                     let t = tex.sample(uv.f(i, 0), uv.f(i, 1), ws, wt);
                     for k in 0..4 {
                         c[k] *= t[k];
@@ -772,14 +809,19 @@ impl Prim<'_, '_> {
             None => None,
         };
         let n_idx = indices.as_ref().map_or(nv, |a| a.count);
-        let corner = |k: usize, tri: usize| -> Result<u32, ImportError> {
+        // The welded vertex of corner `k`, and its texture coordinates.
+        let corner = |k: usize, tri: usize| -> Result<(u32, [f32; 2]), ImportError> {
             let v = match &indices {
                 Some(a) => a.index(k).ok_or_else(|| {
                     ctx.fail(format!("{where_}: indices are not unsigned integers"))
                 })?,
                 None => k as u32,
             };
-            remap.get(v as usize).copied().ok_or_else(|| {
+            let uv = match &uvs {
+                Some(a) if (v as usize) < a.count => [a.f(v as usize, 0), a.f(v as usize, 1)],
+                _ => [0.0; 2],
+            };
+            let w = remap.get(v as usize).copied().ok_or_else(|| {
                 err(
                     ctx.path,
                     Location::File,
@@ -789,7 +831,8 @@ impl Prim<'_, '_> {
                         face: tri as u64,
                     },
                 )
-            })
+            })?;
+            Ok((w, uv))
         };
         let triangles = match prim.mode() {
             Mode::Triangles => n_idx / 3,
@@ -806,7 +849,15 @@ impl Prim<'_, '_> {
                 _ => (t + 1, t + 2, 0), // fan
             };
             let (a, b, c) = (corner(a, t)?, corner(b, t)?, corner(c, t)?);
-            em.triangle(if flip { [a, c, b] } else { [a, b, c] })?;
+            let (a, b, c) = if flip { (a, c, b) } else { (a, b, c) };
+            match (self.texture, &uvs) {
+                (Some((.., id)), Some(_)) => {
+                    let uv =
+                        [a.1, b.1, c.1].map(|q| q.map(|x| if x.is_finite() { x } else { 0.0 }));
+                    em.textured_triangle([a.0, b.0, c.0], TexturedFace { uv, texture: id })?
+                }
+                _ => em.triangle([a.0, b.0, c.0])?,
+            }
         }
         Ok(done + n_idx as u64)
     }

@@ -30,8 +30,9 @@ mod texture;
 
 pub use error::{ImportError, ImportErrorKind, Location};
 pub use ply_write::{PlyLayout, PlyWriter, write_ply};
-pub use sink::{Mesh, MeshSink, SourceInfo, VertexBatch};
+pub use sink::{Mesh, MeshSink, NO_TEXTURE, SourceInfo, TexturedFace, VertexBatch};
 pub use synth::{Relief, generate_relief, write_relief_ply};
+pub use texture::{SourceTexture, Texture, Wrap, encode_rgba, linear_to_srgb, srgb_to_linear};
 
 use crate::progress::Progress;
 use std::path::Path;
@@ -53,6 +54,8 @@ pub struct ImportStats {
     pub has_colors: bool,
     /// Whether vertex normals from the file were delivered.
     pub has_normals: bool,
+    /// Textures handed to the sink with the triangles' texture coordinates.
+    pub textures: u32,
 }
 
 /// Input formats the importer understands.

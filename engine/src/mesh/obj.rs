@@ -13,10 +13,14 @@ use super::common::{
     BATCH, Emitter, LineReader, Tokens, check_finite, err, open, parse_f32, parse_i64, show,
 };
 use super::texture::{Texture, Wrap, encode_rgba, linear_to_srgb};
-use super::{ImportError, ImportErrorKind as K, ImportStats, Location, MeshSink, SourceInfo};
+use super::{
+    ImportError, ImportErrorKind as K, ImportStats, Location, MeshSink, NO_TEXTURE, SourceInfo,
+    SourceTexture,
+};
 use crate::progress::Progress;
 use std::collections::{HashMap, HashSet};
 use std::path::{Component, Path, PathBuf};
+use std::sync::Arc;
 
 const NONE: u32 = u32::MAX;
 
@@ -39,6 +43,24 @@ pub(crate) fn read(
         has_colors,
         has_normals,
     })?;
+
+    // Every used material with a texture is one texture of the sink; faces carry their
+    // corners' coordinates (OBJ's v = 0 is the bottom row: handed over as 1 - v).
+    let mut texture_of: Vec<u32> = vec![NO_TEXTURE; scan.materials.len()];
+    for (m, slot) in scan.materials.iter().zip(texture_of.iter_mut()) {
+        if let (Some(tex), true) = (&m.texture, m.used) {
+            *slot = em.stats.textures;
+            em.texture(SourceTexture {
+                image: tex.clone(),
+                wrap_s: Wrap::Repeat,
+                wrap_t: Wrap::Repeat,
+            })?;
+        }
+    }
+    let textured = em.textured();
+    let mut current = NONE;
+    let (mut nvt, mut nvn) = (0u64, 0u64);
+    let mut uvs: Vec<[f32; 2]> = Vec::new();
 
     let (file, _) = open(path)?;
     let mut lines = LineReader::from_file(file);
@@ -98,6 +120,29 @@ pub(crate) fn read(
                 em.vertex(xyz, color, normal)?;
                 nv += 1;
             }
+            Some(b"f") if textured => {
+                corners.clear();
+                uvs.clear();
+                let texture = texture_of
+                    .get(current as usize)
+                    .copied()
+                    .unwrap_or(NO_TEXTURE);
+                let mut all_vt = true;
+                for tok in t {
+                    let c = corner(path, line_no, tok, [nv, nvt, nvn], faces)?;
+                    corners.push(c.v);
+                    match scan.texcoords.get(c.vt as usize) {
+                        Some(uv) => uvs.push([uv[0], 1.0 - uv[1]]),
+                        None => {
+                            all_vt = false;
+                            uvs.push([0.0; 2]);
+                        }
+                    }
+                }
+                let texture = if all_vt { texture } else { NO_TEXTURE };
+                em.textured_polygon(&corners, &uvs, texture)?;
+                faces += 1;
+            }
             Some(b"f") => {
                 corners.clear();
                 for tok in t {
@@ -108,6 +153,12 @@ pub(crate) fn read(
                 }
                 em.polygon(&corners)?;
                 faces += 1;
+            }
+            Some(b"vt") => nvt += 1,
+            Some(b"vn") => nvn += 1,
+            Some(b"usemtl") if textured => {
+                let name = rest_of(line, b"usemtl");
+                current = scan.by_name.get(&name).copied().unwrap_or(NONE);
             }
             _ => {}
         }
@@ -234,7 +285,7 @@ fn resolve(
 struct Material {
     name: String,
     kd: Option<[f32; 3]>,
-    texture: Option<Texture>,
+    texture: Option<Arc<Texture>>,
     used: bool,
 }
 
@@ -245,6 +296,7 @@ struct Scan {
     vertex_colors: bool,
     max_color: f32,
     materials: Vec<Material>,
+    by_name: HashMap<String, u32>,
     texcoords: Vec<[f32; 2]>,
     normals: Vec<[f32; 3]>,
     /// Per vertex: material and `vt` of the first corner using it (only if materials exist).
@@ -264,13 +316,14 @@ fn scan(
         vertex_colors: false,
         max_color: 0.0,
         materials: Vec::new(),
+        by_name: HashMap::new(),
         texcoords: Vec::new(),
         normals: Vec::new(),
         first_use: None,
         first_vn: None,
     };
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut by_name: HashMap<String, u32> = HashMap::new();
+    let mut by_name = std::mem::take(&mut s.by_name);
     let mut loaded: HashSet<PathBuf> = HashSet::new();
     let mut current = NONE;
     let mut n_lines: u64 = 0;
@@ -374,6 +427,7 @@ fn scan(
             _ => {}
         }
     }
+    s.by_name = by_name;
     Ok(s)
 }
 
@@ -459,7 +513,7 @@ fn read_mtl(path: &Path, materials: &mut Vec<Material>, by_name: &mut HashMap<St
                 let name = texture_name(line);
                 match local_file(dir, &name) {
                     Some(file) => match Texture::open(&file) {
-                        Ok(tex) => m.texture = Some(tex),
+                        Ok(tex) => m.texture = Some(Arc::new(tex)),
                         Err(e) => tracing::warn!(path = %file.display(),
                             "cannot decode texture of material '{}': {e}", m.name),
                     },

@@ -1,6 +1,27 @@
 //! The streaming interface between readers and consumers, and the in-memory consumer.
 
 use super::ImportError;
+use super::texture::SourceTexture;
+
+/// The texture of a triangle that has none ([`TexturedFace::texture`]).
+pub const NO_TEXTURE: u32 = u32::MAX;
+
+/// Where one triangle's corners lie in one of the scan's textures: `uv[k]` for corner `k`
+/// (glTF convention, `v = 0` at the top), `texture` the index of a texture the reader handed
+/// to [`MeshSink::texture`], or [`NO_TEXTURE`].
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TexturedFace {
+    pub uv: [[f32; 2]; 3],
+    pub texture: u32,
+}
+
+impl TexturedFace {
+    pub const NONE: TexturedFace = TexturedFace {
+        uv: [[0.0; 2]; 3],
+        texture: NO_TEXTURE,
+    };
+}
 
 /// What a reader knows before it streams the data (from a header, when the format has one).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -23,10 +44,29 @@ pub struct VertexBatch<'a> {
 /// Consumer of a streamed mesh. Readers call `begin` once, then `vertices` and `triangles`
 /// in any interleaving where a triangle only names vertices already delivered.
 /// Readers guarantee: positions are finite, indices are in range, no triangle repeats a vertex.
+///
+/// Textured scans: the reader hands over its textures after `begin` and before any triangle
+/// (indices in call order from 0), then delivers every triangle through `textured_triangles`.
+/// Sinks that keep no textures use the defaults: textures are dropped and triangles go to
+/// `triangles` (the vertex colours carry the texture sampled at each vertex).
 pub trait MeshSink {
     fn begin(&mut self, info: &SourceInfo) -> Result<(), ImportError>;
     fn vertices(&mut self, batch: VertexBatch<'_>) -> Result<(), ImportError>;
     fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError>;
+
+    fn texture(&mut self, _texture: SourceTexture) -> Result<(), ImportError> {
+        Ok(())
+    }
+
+    /// Triangles with their corners' texture coordinates (`faces[i]` belongs to
+    /// `triangles[i]`).
+    fn textured_triangles(
+        &mut self,
+        triangles: &[[u32; 3]],
+        _faces: &[TexturedFace],
+    ) -> Result<(), ImportError> {
+        self.triangles(triangles)
+    }
 }
 
 /// An indexed triangle mesh in flat arrays (meshoptimizer style). Vertex `i` has original ID `i`.

@@ -1,4 +1,6 @@
-//! Colour textures sampled into vertex colours (OBJ `map_Kd`, glTF base colour).
+//! Colour textures of a scan (OBJ `map_Kd`, glTF base colour): sampled into vertex colours at
+//! import, and handed to the sink whole ([`SourceTexture`]) so the LOD build can re-pack them
+//! per patch (`lod::atlas`).
 //!
 //! Texels are sRGB; sampling is bilinear in linear light, and callers encode back to sRGB.
 
@@ -9,15 +11,15 @@ use std::sync::LazyLock;
 const MAX_SIDE: u32 = 32768;
 
 /// How texture coordinates outside [0, 1] map onto the image.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Wrap {
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Wrap {
     Repeat,
     Clamp,
     Mirror,
 }
 
 /// A decoded RGBA8 (sRGB) image.
-pub(crate) struct Texture {
+pub struct Texture {
     width: u32,
     height: u32,
     texels: Vec<[u8; 4]>,
@@ -36,15 +38,41 @@ static SRGB_TO_LINEAR: LazyLock<[f32; 256]> = LazyLock::new(|| {
     t
 });
 
+/// A texture of the scan as a reader hands it to a sink: the image and how coordinates outside
+/// [0, 1] map onto it. Texture coordinates use the glTF convention (`v = 0` is the top row).
+#[derive(Clone)]
+pub struct SourceTexture {
+    pub image: std::sync::Arc<Texture>,
+    pub wrap_s: Wrap,
+    pub wrap_t: Wrap,
+}
+
+impl SourceTexture {
+    /// Bilinear sample in linear light, with this texture's wrap modes.
+    pub fn sample(&self, uv: [f32; 2]) -> [f32; 4] {
+        self.image.sample(uv[0], uv[1], self.wrap_s, self.wrap_t)
+    }
+}
+
+impl std::fmt::Debug for SourceTexture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "SourceTexture({}x{}, {:?}/{:?})",
+            self.image.width, self.image.height, self.wrap_s, self.wrap_t
+        )
+    }
+}
+
 /// sRGB byte to linear light in [0, 1].
 #[inline]
-pub(crate) fn srgb_to_linear(c: u8) -> f32 {
+pub fn srgb_to_linear(c: u8) -> f32 {
     SRGB_TO_LINEAR[c as usize]
 }
 
 /// Linear light (clamped to [0, 1]) to an sRGB byte.
 #[inline]
-pub(crate) fn linear_to_srgb(l: f32) -> u8 {
+pub fn linear_to_srgb(l: f32) -> u8 {
     let l = if l.is_nan() { 0.0 } else { l.clamp(0.0, 1.0) };
     let c = if l <= 0.003_130_8 {
         l * 12.92
@@ -55,7 +83,7 @@ pub(crate) fn linear_to_srgb(l: f32) -> u8 {
 }
 
 /// Linear RGBA (alpha linear too) to sRGB RGBA bytes.
-pub(crate) fn encode_rgba(l: [f32; 4]) -> [u8; 4] {
+pub fn encode_rgba(l: [f32; 4]) -> [u8; 4] {
     let a = if l[3].is_nan() {
         1.0
     } else {
@@ -107,14 +135,34 @@ impl Texture {
         })
     }
 
-    #[cfg(test)]
-    pub fn from_texels(width: u32, height: u32, texels: Vec<[u8; 4]>) -> Texture {
-        assert_eq!(texels.len(), (width * height) as usize);
-        Texture {
-            width,
-            height,
-            texels,
-        }
+    /// An image from its texels, row by row from the top; `None` when the sizes disagree or
+    /// the image is empty.
+    pub fn from_texels(width: u32, height: u32, texels: Vec<[u8; 4]>) -> Option<Texture> {
+        (width > 0 && height > 0 && texels.len() as u64 == width as u64 * height as u64).then_some(
+            Texture {
+                width,
+                height,
+                texels,
+            },
+        )
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Texels, row by row from the top.
+    pub fn texels(&self) -> &[[u8; 4]] {
+        &self.texels
+    }
+
+    /// Decoded size in bytes.
+    pub fn bytes(&self) -> u64 {
+        self.texels.len() as u64 * 4
     }
 
     /// Bilinear sample in linear light. `(u, v)` use the glTF convention: `v = 0` is the top
@@ -185,7 +233,8 @@ mod tests {
 
     #[test]
     fn bilinear_centre_and_wrap() {
-        let t = Texture::from_texels(2, 1, vec![[0, 0, 0, 255], [255, 255, 255, 255]]);
+        let t = Texture::from_texels(2, 1, vec![[0, 0, 0, 255], [255, 255, 255, 255]])
+            .expect("sizes agree");
         // Texel centres.
         assert_eq!(
             encode_rgba(t.sample(0.25, 0.5, Wrap::Clamp, Wrap::Clamp))[0],

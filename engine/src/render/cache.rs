@@ -7,7 +7,9 @@
 //! flight are evicted first. Pinned entries stay alive through their `Arc` until that render
 //! ends, so the peak is the budget plus the batches of the renders in flight.
 
+use super::pipeline::{Pipelines, atlas_texture};
 use crate::lod::{NodeRecord, Patch, codec};
+use crate::mesh::Texture;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -24,11 +26,17 @@ pub struct PatchLayout {
     pub colors: u32,
     pub ids: u32,
     pub indices: u32,
+    /// Texture coordinates (unorm16 pairs); `u32::MAX` when the patch has no atlas.
+    pub uvs: u32,
     pub words: u32,
 }
 
 impl PatchLayout {
     pub fn new(vertices: u32, triangles: u32, colors: bool) -> PatchLayout {
+        Self::with_uvs(vertices, triangles, colors, false)
+    }
+
+    pub fn with_uvs(vertices: u32, triangles: u32, colors: bool, uvs: bool) -> PatchLayout {
         let (v, t) = (vertices as u64, triangles as u64);
         let positions = 0u64;
         let normals = 3 * v;
@@ -38,7 +46,11 @@ impl PatchLayout {
             (u32::MAX as u64, 6 * v)
         };
         let indices = ids + v;
-        let words = indices + 3 * t;
+        let (uv_at, words) = if uvs {
+            (indices + 3 * t, indices + 3 * t + v)
+        } else {
+            (u32::MAX as u64, indices + 3 * t)
+        };
         // Patches hold at most 2^20 elements (codec limit), so these fit in u32.
         let c = |x: u64| x.min(u32::MAX as u64) as u32;
         PatchLayout {
@@ -47,6 +59,7 @@ impl PatchLayout {
             colors: c(colors),
             ids: c(ids),
             indices: c(indices),
+            uvs: c(uv_at),
             words: c(words),
         }
     }
@@ -66,6 +79,7 @@ pub struct GpuPatch {
     pub layout: PatchLayout,
     pub bind_group: wgpu::BindGroup,
     _buffer: wgpu::Buffer,
+    _atlas: Option<wgpu::Texture>,
     /// Original vertex ids (CPU copy, for highlight masks).
     pub original_ids: Vec<u32>,
     /// Smallest and largest original id.
@@ -255,10 +269,14 @@ impl PatchCache {
 
     /// Uploads a decoded patch (not yet inserted), writing straight into the mapped buffer.
     /// `shared_memory`: the buffer is host-visible (no staging copy).
+    /// A patch's atlas image (JPEG) that does not decode is logged and the patch drawn with
+    /// its vertex colours.
+    #[allow(clippy::too_many_arguments)]
     pub fn upload(
         &self,
         device: &wgpu::Device,
-        bind_layout: &wgpu::BindGroupLayout,
+        queue: &wgpu::Queue,
+        pipelines: &Pipelines,
         node: u32,
         patch: &Patch,
         has_colors: bool,
@@ -267,7 +285,17 @@ impl PatchCache {
         let n = patch.positions.len();
         let t = patch.indices.len() / 3;
         let colors = has_colors && patch.colors.len() == n;
-        let layout = PatchLayout::new(n as u32, t as u32, colors);
+        let image = match patch.image.as_deref() {
+            Some(bytes) if patch.uvs.len() == n => match Texture::decode(bytes) {
+                Ok(img) => Some(img),
+                Err(e) => {
+                    tracing::warn!(node, error = %e, "patch atlas does not decode");
+                    None
+                }
+            },
+            _ => None,
+        };
+        let layout = PatchLayout::with_uvs(n as u32, t as u32, colors, image.is_some());
         let words_len = (layout.words as usize).max(1);
         let mut usage = wgpu::BufferUsages::STORAGE;
         if shared_memory {
@@ -309,21 +337,51 @@ impl PatchCache {
             put(&mut scratch);
             scratch.extend_from_slice(&patch.indices[..t * 3]);
             put(&mut scratch);
+            if image.is_some() {
+                scratch.extend(patch.uvs.iter().map(|uv| {
+                    let q = uv.map(|x| (x.clamp(0.0, 1.0) * 65535.0 + 0.5) as u32);
+                    q[0] | (q[1] << 16)
+                }));
+                put(&mut scratch);
+            }
         }
         buffer.unmap();
+        let atlas = image.as_ref().map(|img| {
+            atlas_texture(
+                device,
+                queue,
+                img.width(),
+                img.height(),
+                bytemuck::cast_slice(img.texels()),
+            )
+        });
+        let atlas_view = atlas.as_ref().map(|a| a.create_view(&Default::default()));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("patch"),
-            layout: bind_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: buffer.as_entire_binding(),
-            }],
+            layout: &pipelines.patch_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(
+                        atlas_view.as_ref().unwrap_or(&pipelines.no_atlas),
+                    ),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&pipelines.atlas_sampler),
+                },
+            ],
         });
         let id_range = (
             patch.original_ids.iter().copied().min().unwrap_or(0),
             patch.original_ids.iter().copied().max().unwrap_or(0),
         );
-        let bytes = words_len as u64 * 4 + n as u64 * 4 + 512;
+        let bytes =
+            words_len as u64 * 4 + n as u64 * 4 + 512 + image.as_ref().map_or(0, |img| img.bytes());
         self.live.fetch_add(bytes, Ordering::Relaxed);
         GpuPatch {
             node,
@@ -332,6 +390,7 @@ impl PatchCache {
             layout,
             bind_group,
             _buffer: buffer,
+            _atlas: atlas,
             original_ids: patch.original_ids.clone(),
             id_range,
             bytes,

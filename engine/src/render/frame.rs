@@ -40,7 +40,7 @@ struct DrawRecord {
     ids: u32,
     indices: u32,
     masks: u32,
-    _pad: u32,
+    uvs: u32,
 }
 
 #[repr(C)]
@@ -361,7 +361,7 @@ impl Renderer {
                     ids: p.layout.ids,
                     indices: p.layout.indices,
                     masks: offset,
-                    _pad: 0,
+                    uvs: p.layout.uvs,
                 }
             })
             .collect();

@@ -336,7 +336,7 @@ fn gpu_err(e: wgpu::Error) -> RenderError {
 impl Renderer {
     /// A renderer on an open device.
     pub fn new(gpu: Arc<GpuDevice>, options: RendererOptions) -> Renderer {
-        let pipelines = Pipelines::new(&gpu.device);
+        let pipelines = Pipelines::new(&gpu.device, &gpu.queue);
         Renderer {
             pipelines,
             cache: PatchCache::new(options.cache_bytes),
@@ -577,7 +577,8 @@ impl Renderer {
                 .map(|(&i, p)| {
                     let patch = self.cache.upload(
                         &self.gpu.device,
-                        &self.pipelines.patch_layout,
+                        &self.gpu.queue,
+                        &self.pipelines,
                         batch[i],
                         &p,
                         model.lod.has_colors(),

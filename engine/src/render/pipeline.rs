@@ -5,6 +5,7 @@
 //! pictures, `buffers` (colour, packed normal, ids) for selection. Depth is a `Depth32Float`
 //! attachment with reversed Z (cleared to 0, test `Greater`), read back as linear view depth.
 
+use wgpu::util::DeviceExt;
 use wgpu::{
     BindGroupLayout, BindGroupLayoutEntry, BindingType, BufferBindingType, ColorTargetState,
     Device, RenderPipeline, ShaderStages, TextureFormat,
@@ -15,6 +16,8 @@ pub const MASK_FORMAT: TextureFormat = TextureFormat::R32Uint;
 pub const NORMAL_FORMAT: TextureFormat = TextureFormat::R32Uint;
 pub const IDS_FORMAT: TextureFormat = TextureFormat::Rgba32Uint;
 pub const DEPTH_FORMAT: TextureFormat = TextureFormat::Depth32Float;
+/// Patch atlases: sRGB bytes sampled as they are, like vertex colours.
+pub const ATLAS_FORMAT: TextureFormat = TextureFormat::Rgba8Unorm;
 
 const RENDER_WGSL: &str = include_str!("../../../shaders/render.wgsl");
 const OUTLINE_WGSL: &str = include_str!("../../../shaders/outline.wgsl");
@@ -23,6 +26,10 @@ const OUTLINE_WGSL: &str = include_str!("../../../shaders/outline.wgsl");
 pub struct Pipelines {
     pub frame_layout: BindGroupLayout,
     pub patch_layout: BindGroupLayout,
+    /// Bilinear, clamped: how every patch samples its atlas.
+    pub atlas_sampler: wgpu::Sampler,
+    /// A white texel, bound for patches without atlas.
+    pub no_atlas: wgpu::TextureView,
     pub outline_layout: BindGroupLayout,
     pub image: RenderPipeline,
     pub buffers: RenderPipeline,
@@ -76,8 +83,37 @@ fn target(format: TextureFormat) -> Option<ColorTargetState> {
     })
 }
 
+/// A patch atlas on the GPU: `texels` RGBA8, row by row from the top.
+pub fn atlas_texture(
+    device: &Device,
+    queue: &wgpu::Queue,
+    width: u32,
+    height: u32,
+    texels: &[u8],
+) -> wgpu::Texture {
+    device.create_texture_with_data(
+        queue,
+        &wgpu::TextureDescriptor {
+            label: Some("atlas"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: ATLAS_FORMAT,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        texels,
+    )
+}
+
 impl Pipelines {
-    pub fn new(device: &Device) -> Pipelines {
+    pub fn new(device: &Device, queue: &wgpu::Queue) -> Pipelines {
         let vf = ShaderStages::VERTEX | ShaderStages::FRAGMENT;
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
@@ -90,8 +126,27 @@ impl Pipelines {
         });
         let patch_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("patch"),
-            entries: &[storage(0, ShaderStages::VERTEX)],
+            entries: &[
+                storage(0, ShaderStages::VERTEX),
+                texture(1, wgpu::TextureSampleType::Float { filterable: true }),
+                BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: ShaderStages::FRAGMENT,
+                    ty: BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
         });
+        let atlas_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("atlas"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let white = atlas_texture(device, queue, 1, 1, &[255; 4]);
+        let no_atlas = white.create_view(&Default::default());
         let outline_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("outline"),
             entries: &[
@@ -191,6 +246,8 @@ impl Pipelines {
         Pipelines {
             frame_layout,
             patch_layout,
+            atlas_sampler,
+            no_atlas,
             outline_layout,
             image,
             buffers,

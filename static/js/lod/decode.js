@@ -6,12 +6,21 @@
 // doubles holding exact integers (|v| < 2^53); no 32-bit bitwise operator touches them.
 // Normals: every vertex gets the area-weighted normal of the integer grid positions (f64,
 // exact); border vertices add a stored octahedral residual (8 bits) to that prediction.
+// Textures (docs/FORMAT.md "Patch blob", "Textures"): a textured blob carries its atlas (a
+// JPEG) in an image section before the payload, and the payload a sixth stream of u16 texture
+// coordinates; vertices where the atlas' charts meet come once per chart (same original id,
+// same grid position), which changes nothing else here.
 
 const MAGIC = [0x4d, 0x57, 0x50, 0x32]; // "MWP2"
 const COMPRESSION_NONE = 0;
 const COMPRESSION_ZSTD = 1;
 const FLAG_COLORS = 1;
 const FLAG_NORMALS = 2;
+const FLAG_UVS = 4;
+/** Blob header flag (byte 5): an image section (u32 length, then the JPEG) follows byte 12. */
+const BLOB_IMAGE = 1;
+const STREAMS = 6;
+const UV_SCALE = 65535;
 const PAYLOAD_HEADER = 52;
 const MAX_ELEMENTS = 1 << 20;
 const MAX_SHIFT = 24;
@@ -77,7 +86,7 @@ const floorShift = (v, s) => Math.floor(v / 2 ** s);
  * time a triangle uses it: kind 0 = parallelogram a + b - c, 1 = midpoint of a and b,
  * 2 = copy of a, 3 = zero (the very first vertex). Mirrors `Predictor::walk`.
  */
-function walk(indices, n, visit) {
+export function walk(indices, n, visit) {
   const known = new Uint8Array(n);
   const opposite = new Map();
   let last = -1;
@@ -117,7 +126,8 @@ function walk(indices, n, visit) {
   return visited;
 }
 
-function predict(values, stride, k, kind, a, b, c) {
+/** The prediction of `walk`'s `kind` for component `k` of `values` (`stride` per vertex). */
+export function predict(values, stride, k, kind, a, b, c) {
   switch (kind) {
     case 0:
       return values[a * stride + k] + values[b * stride + k] - values[c * stride + k];
@@ -279,6 +289,40 @@ export function decodeYCoCg(c) {
 }
 
 /**
+ * Width and height of a JPEG image from its frame header (the first SOFn marker), without
+ * decoding it; null when `bytes` is not a JPEG or has no frame header with a size.
+ * @param {Uint8Array} bytes
+ * @returns {{width: number, height: number}|null}
+ */
+export function jpegSize(bytes) {
+  if (!bytes || bytes.length < 4 || bytes[0] !== 0xff || bytes[1] !== 0xd8) return null;
+  let at = 2;
+  while (at + 3 < bytes.length) {
+    if (bytes[at] !== 0xff) return null;
+    const marker = bytes[at + 1];
+    if (marker === 0xff) {
+      at++; // fill byte
+      continue;
+    }
+    at += 2;
+    // Markers without a length: TEM, RSTn, SOI; EOI or SOS before a frame header: no size.
+    if (marker === 0x01 || (marker >= 0xd0 && marker <= 0xd8)) continue;
+    if (marker === 0xd9 || marker === 0xda) return null;
+    const len = (bytes[at] << 8) | bytes[at + 1];
+    if (len < 2) return null;
+    // SOF0..SOF15 but DHT (C4), JPG (C8) and DAC (CC): precision, height, width.
+    if (marker >= 0xc0 && marker <= 0xcf && marker !== 0xc4 && marker !== 0xc8 && marker !== 0xcc) {
+      if (len < 7 || at + 7 > bytes.length) return null;
+      const height = (bytes[at + 3] << 8) | bytes[at + 4];
+      const width = (bytes[at + 5] << 8) | bytes[at + 6];
+      return width > 0 && height > 0 ? { width, height } : null;
+    }
+    at += len;
+  }
+  return null;
+}
+
+/**
  * Decodes one patch blob.
  * @param {Uint8Array} blob
  * @param {{origin: number[], step: number}} grid the model grid (header)
@@ -287,7 +331,10 @@ export function decodeYCoCg(c) {
  * @returns {{vertexCount: number, triangleCount: number, shift: number,
  *   gridPositions: Uint32Array, positions: Float32Array, ids: Uint32Array,
  *   indices: Uint32Array, colors: Uint8Array|null, normals: Float32Array|null,
- *   border: Uint8Array}}
+ *   uvs: Float32Array|null, image: Uint8Array|null, border: Uint8Array}}
+ *   `uvs`: texture coordinates (u, v per vertex, v = 0 the image's top row) when the payload
+ *   has them; `image`: the atlas (JPEG bytes, a copy owning its buffer) when the blob has an
+ *   image section.
  */
 export function decodePatch(blob, grid, deps) {
   if (!(blob instanceof Uint8Array)) throw new DecodeError('blob must be a Uint8Array');
@@ -295,12 +342,21 @@ export function decodePatch(blob, grid, deps) {
   for (let i = 0; i < 4; i++) if (blob[i] !== MAGIC[i]) throw new DecodeError('bad blob magic');
   const payloadLen = u32(blob, 8);
   if (payloadLen > MAX_PAYLOAD) throw new DecodeError('patch declares implausible sizes');
+  // Blob flags (byte 5): with an image section, the payload starts after it.
+  let image = null;
+  let body = 12;
+  if (blob[5] & BLOB_IMAGE) {
+    const imageLen = u32(blob, 12);
+    if (16 + imageLen > blob.length) throw new DecodeError('blob truncated');
+    image = blob.slice(16, 16 + imageLen);
+    body = 16 + imageLen;
+  }
   let payload;
   if (blob[4] === COMPRESSION_NONE) {
-    payload = blob.subarray(12);
+    payload = blob.subarray(body);
   } else if (blob[4] === COMPRESSION_ZSTD) {
     try {
-      payload = deps.decompress(blob.subarray(12), new Uint8Array(payloadLen));
+      payload = deps.decompress(blob.subarray(body), new Uint8Array(payloadLen));
     } catch (e) {
       throw new DecodeError(`decompression failed: ${e && e.message}`);
     }
@@ -320,13 +376,14 @@ export function decodePatch(blob, grid, deps) {
   const min = [u32(payload, 16), u32(payload, 20), u32(payload, 24)];
   const streams = [];
   let at = PAYLOAD_HEADER;
-  for (let i = 0; i < 5; i++) {
+  // The sixth length (byte 48) was reserved, always 0, before texture coordinates existed.
+  for (let i = 0; i < STREAMS; i++) {
     const len = u32(payload, 28 + 4 * i);
     if (at + len > payload.length) throw new DecodeError('blob truncated');
     streams.push(payload.subarray(at, at + len));
     at += len;
   }
-  const [idxS, posS, idsS, colS, norS] = streams;
+  const [idxS, posS, idsS, colS, norS, uvS] = streams;
   const { meshopt } = deps;
 
   const indexBytes = new Uint8Array(t * 3 * 4);
@@ -405,6 +462,20 @@ export function decodePatch(blob, grid, deps) {
       octDecode(qx, qy, normals, v * 3);
     }
   }
+  let uvs = null;
+  if (flags & FLAG_UVS) {
+    // u16 u, u16 v (little-endian) per vertex through the vertex codec; q / 65535 in [0, 1].
+    uvs = new Float32Array(n * 2);
+    if (n > 0) {
+      const q = new Uint8Array(n * 4);
+      try {
+        meshopt.decodeVertexBuffer(q, n, 4, uvS);
+      } catch {
+        throw new DecodeError('stream uvs does not decode');
+      }
+      for (let i = 0; i < n * 2; i++) uvs[i] = (q[2 * i] | (q[2 * i + 1] << 8)) / UV_SCALE;
+    }
+  }
   return {
     vertexCount: n,
     triangleCount: t,
@@ -415,6 +486,8 @@ export function decodePatch(blob, grid, deps) {
     indices,
     colors,
     normals,
+    uvs,
+    image,
     border,
   };
 }

@@ -23,9 +23,21 @@ export const DEFAULT_SETTINGS = {
 
 const RETRY_MS = 3000;
 
-/** Bytes a decoded patch holds (GPU buffers and the CPU copy of its ids). */
+/**
+ * RGBA bytes a textured patch's atlas is assumed to take per byte of its blob before the
+ * image's size is known: a low guess (JPEGs of quality 85 decode to some 10–30 times their
+ * size), so scheduling errs towards fetching; the cache counts the real size (`patchBytes`)
+ * and evicts accordingly.
+ */
+const TEXTURE_BYTES_PER_BLOB_BYTE = 10;
+
+/**
+ * Bytes a decoded patch holds (GPU buffers and the CPU copy of its ids); a textured patch adds
+ * its coordinates and its texture, width × height × 4 (RGBA8, no mipmaps).
+ */
 export function patchBytes(p) {
-  return p.positions.byteLength + p.normals.byteLength + (p.colors ? p.colors.byteLength : 0) + p.indices.byteLength + p.ids.byteLength + p.vertexCount * 2;
+  const texture = p.uvs ? p.uvs.byteLength + (p.imageWidth || 0) * (p.imageHeight || 0) * 4 : 0;
+  return p.positions.byteLength + p.normals.byteLength + (p.colors ? p.colors.byteLength : 0) + p.indices.byteLength + p.ids.byteLength + p.vertexCount * 2 + texture;
 }
 
 export class Streamer {
@@ -153,7 +165,8 @@ export class Streamer {
     const affordable = [];
     let extra = 0;
     for (const c of candidates) {
-      const estimate = t.vertices[c.node] * 34 + t.triangles[c.node] * 6;
+      let estimate = t.vertices[c.node] * 34 + t.triangles[c.node] * 6;
+      if (t.hasTexture) estimate += t.vertices[c.node] * 8 + t.length[c.node] * TEXTURE_BYTES_PER_BLOB_BYTE;
       if (!this.cache.fits(extra + estimate, this.cut.pinned) && c.priority !== Infinity) break;
       extra += estimate;
       affordable.push(c);

@@ -7,6 +7,11 @@ const NODE_BYTES = 128;
 const GROUP_BYTES = 48;
 const NO_GROUP = 0xffffffff;
 const MAGIC = [0x4d, 0x57, 0x4c, 0x4f, 0x44, 0x00, 0x0d, 0x0a]; // "MWLOD\0\r\n"
+/** Header flags (docs/FORMAT.md "File layout", byte 12). */
+const HAS_COLORS = 1;
+const HAS_NORMALS = 2;
+/** Every patch carries a texture atlas (an image section and texture coordinates). */
+const HAS_TEXTURE = 4;
 
 let crcTable = null;
 
@@ -113,8 +118,9 @@ export function parseBinary(buffer) {
   }
   const t = emptyTables(nodeCount, groupCount);
   t.version = version;
-  t.hasColors = (flags & 1) !== 0;
-  t.hasNormals = (flags & 2) !== 0;
+  t.hasColors = (flags & HAS_COLORS) !== 0;
+  t.hasNormals = (flags & HAS_NORMALS) !== 0;
+  t.hasTexture = (flags & HAS_TEXTURE) !== 0;
   t.levelCount = view.getUint32(28, true);
   t.inputVertices = u64(view, 32);
   t.inputTriangles = u64(view, 40);
@@ -178,6 +184,7 @@ export function fromJson(json) {
   t.version = json.version;
   t.hasColors = !!json.has_colors;
   t.hasNormals = !!json.has_normals;
+  t.hasTexture = !!json.has_texture;
   t.levelCount = json.level_count;
   t.inputVertices = json.input_vertices;
   t.inputTriangles = json.input_triangles;

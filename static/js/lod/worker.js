@@ -1,10 +1,12 @@
 // Decoding worker: checks a patch blob's CRC, decodes it (decode.js) and sends back
-// GPU-ready arrays (transferred, not copied). Started as a module worker by workers.js.
+// GPU-ready arrays (transferred, not copied), and for textured patches the atlas' JPEG bytes
+// (decoded to a bitmap on the main thread, scene.js) with its size read from its header.
+// Started as a module worker by workers.js.
 // Import maps do not reach workers, so the vendor modules are imported by URL.
 
 import { MeshoptDecoder } from '/static/vendor/meshoptimizer/meshopt_decoder.mjs';
 import { decompress } from '/static/vendor/fzstd/esm/index.mjs';
-import { decodePatch, computedNormals } from './decode.js';
+import { decodePatch, computedNormals, jpegSize } from './decode.js';
 import { crc32 } from './table.js';
 
 const ready = MeshoptDecoder.ready.then(() => ({ meshopt: MeshoptDecoder, decompress }));
@@ -13,6 +15,9 @@ const ready = MeshoptDecoder.ready.then(() => ({ meshopt: MeshoptDecoder, decomp
 function pack(p) {
   const indices = p.vertexCount <= 65536 ? Uint16Array.from(p.indices) : p.indices;
   const normals = p.normals || computedNormals(p.positions, p.indices, p.vertexCount);
+  // A texture needs both the image and the coordinates (docs/FORMAT.md "Textures").
+  const textured = p.image !== null && p.uvs !== null;
+  const size = textured ? jpegSize(p.image) : null;
   return {
     vertexCount: p.vertexCount,
     triangleCount: p.triangleCount,
@@ -21,6 +26,10 @@ function pack(p) {
     colors: p.colors,
     ids: p.ids,
     indices,
+    uvs: textured ? p.uvs : null,
+    image: textured ? p.image : null,
+    imageWidth: size ? size.width : 0,
+    imageHeight: size ? size.height : 0,
   };
 }
 
@@ -33,6 +42,8 @@ self.onmessage = async (event) => {
     const patch = pack(decodePatch(bytes, grid, deps));
     const transfer = [patch.positions.buffer, patch.normals.buffer, patch.ids.buffer, patch.indices.buffer];
     if (patch.colors) transfer.push(patch.colors.buffer);
+    // decodePatch's image is a copy with its own buffer, so this does not move the blob.
+    if (patch.uvs) transfer.push(patch.uvs.buffer, patch.image.buffer);
     self.postMessage({ id, patch }, transfer);
   } catch (e) {
     self.postMessage({ id, error: String((e && e.message) || e) });

@@ -62,7 +62,7 @@ class Viewer {
     this.stage = document.createElement('div');
     this.stage.className = 'viewer-stage';
     root.appendChild(this.stage);
-    this.view = new SceneView(this.stage, table);
+    this.view = new SceneView(this.stage, table, { onChange: () => this.requestFrame() });
     this.overlay = document.createElement('div');
     this.overlay.className = 'viewer-overlay';
     this.stage.appendChild(this.overlay);

@@ -2,7 +2,10 @@
 // shading as the server's renderer (shaders/render.wgsl: vertex colour or base albedo, times
 // ambient + (1 - ambient)·|n·v| from a headlight) so browser and server images agree; parts
 // are tinted per vertex (exact: marks come from original ids), the hovered/selected part gets
-// a bold outline (outline.js).
+// a bold outline (outline.js). Textured patches (docs/FORMAT.md "Textures") take their colour
+// from their atlas instead of their vertex colours, as the server's `albedo` does: the JPEG is
+// decoded to a bitmap here (until then the patch shows its vertex colours) and sampled as it
+// is, RGBA8 without sRGB decoding, bilinear and clamped, like the server's atlas sampler.
 
 import * as THREE from 'three';
 import { OutlinePass } from './outline.js';
@@ -23,12 +26,14 @@ out vec3 vNormal;
 out vec3 vWorld;
 out vec4 vColor;
 out vec2 vMark;
+out vec2 vUv;
 void main() {
   vec4 world = modelMatrix * vec4(position, 1.0);
   vWorld = world.xyz;
   vNormal = normal;
   vColor = uHasColor > 0.5 ? aColor : uBaseColor;
   vMark = aMark;
+  vUv = uv;
   gl_Position = projectionMatrix * viewMatrix * world;
 }`;
 
@@ -36,10 +41,13 @@ const FRAGMENT = /* glsl */ `
 uniform float uAmbient;
 uniform vec4 uHoverTint;
 uniform vec4 uSelectTint;
+uniform sampler2D uMap;
+uniform float uTextured;
 in vec3 vNormal;
 in vec3 vWorld;
 in vec4 vColor;
 in vec2 vMark;
+in vec2 vUv;
 void main() {
   vec3 v = normalize(cameraPosition - vWorld);
   vec3 n = vNormal;
@@ -47,7 +55,8 @@ void main() {
   n = l > 1e-20 ? n / l : v;
   if (!gl_FrontFacing) n = -n;
   float ndl = abs(dot(n, v));
-  vec3 rgb = vColor.rgb * (uAmbient + (1.0 - uAmbient) * ndl);
+  vec3 albedo = uTextured > 0.5 ? textureLod(uMap, vUv, 0.0).rgb : vColor.rgb;
+  vec3 rgb = albedo * (uAmbient + (1.0 - uAmbient) * ndl);
   if (vMark.y > 0.5) rgb = mix(rgb, uSelectTint.rgb, uSelectTint.a);
   else if (vMark.x > 0.5) rgb = mix(rgb, uHoverTint.rgb, uHoverTint.a);
   gl_FragColor = vec4(clamp(rgb, 0.0, 1.0), 1.0);
@@ -67,14 +76,39 @@ void main() {
 /** The visibility pass renders at 1/VISIBILITY_DOWNSCALE of the canvas in each direction. */
 export const VISIBILITY_DOWNSCALE = 2;
 
+/**
+ * A patch atlas as a texture: the bitmap as it is (no flip: v = 0 is the image's top row, no
+ * colour conversion), RGBA8 (not sRGB), bilinear, clamped, without mipmaps.
+ */
+function atlasTexture(bitmap) {
+  const tex = new THREE.Texture(bitmap);
+  tex.flipY = false;
+  tex.premultiplyAlpha = false;
+  tex.colorSpace = THREE.NoColorSpace;
+  tex.format = THREE.RGBAFormat;
+  tex.type = THREE.UnsignedByteType;
+  tex.generateMipmaps = false;
+  tex.minFilter = THREE.LinearFilter;
+  tex.magFilter = THREE.LinearFilter;
+  tex.wrapS = THREE.ClampToEdgeWrapping;
+  tex.wrapT = THREE.ClampToEdgeWrapping;
+  // Once on the GPU, the bitmap's memory is not needed any more.
+  tex.onUpdate = () => bitmap.close();
+  tex.needsUpdate = true;
+  return tex;
+}
+
 export class SceneView {
   /**
    * @param {HTMLElement} container
    * @param {object} table the LOD tables (bounds of each node)
+   * @param {{onChange?: Function}} [options] `onChange`: something drawn changed on its own
+   *   (a patch's texture became ready), so a frame should be rendered
    */
-  constructor(container, table) {
+  constructor(container, table, options = {}) {
     this.table = table;
     this.container = container;
+    this.onChange = options.onChange || (() => {});
     this.renderer = new THREE.WebGLRenderer({ antialias: true, powerPreference: 'high-performance' });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
     this.renderer.setClearColor(BACKGROUND, 1);
@@ -85,6 +119,9 @@ export class SceneView {
     container.appendChild(this.canvas);
     this.scene = new THREE.Scene();
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 100);
+    // Bound to `uMap` while an untextured patch is drawn (never sampled: `uTextured` is 0).
+    this.noTexture = new THREE.DataTexture(new Uint8Array([255, 255, 255, 255]), 1, 1);
+    this.noTexture.needsUpdate = true;
     this.material = new THREE.ShaderMaterial({
       vertexShader: VERTEX,
       fragmentShader: FRAGMENT,
@@ -95,6 +132,8 @@ export class SceneView {
         uAmbient: { value: AMBIENT },
         uHoverTint: { value: new THREE.Vector4(...HOVER_TINT) },
         uSelectTint: { value: new THREE.Vector4(...SELECT_TINT) },
+        uMap: { value: this.noTexture },
+        uTextured: { value: 0 },
       },
     });
     this.idMaterial = new THREE.ShaderMaterial({
@@ -127,12 +166,18 @@ export class SceneView {
     return true;
   }
 
-  /** Adds a decoded patch (arrays from the worker) as a hidden mesh. */
+  /**
+   * Adds a decoded patch (arrays from the worker) as a hidden mesh. A textured patch (`image`
+   * and `uvs`) gets its texture once the image decodes; it is drawn with its vertex colours
+   * until then.
+   */
   addPatch(node, patch) {
     const g = new THREE.BufferGeometry();
     g.setAttribute('position', new THREE.BufferAttribute(patch.positions, 3));
     g.setAttribute('normal', new THREE.BufferAttribute(patch.normals, 3));
     if (patch.colors) g.setAttribute('aColor', new THREE.BufferAttribute(patch.colors, 4, true));
+    const textured = !!(patch.image && patch.uvs);
+    if (textured) g.setAttribute('uv', new THREE.BufferAttribute(patch.uvs, 2));
     const marks = new THREE.BufferAttribute(new Uint8Array(patch.vertexCount * 2), 2, false);
     marks.setUsage(THREE.DynamicDrawUsage);
     g.setAttribute('aMark', marks);
@@ -142,16 +187,49 @@ export class SceneView {
     const mesh = new THREE.Mesh(g, this.material);
     mesh.matrixAutoUpdate = false;
     mesh.visible = false;
-    mesh.userData = { node, ids: patch.ids, vertexCount: patch.vertexCount };
+    mesh.userData = { node, ids: patch.ids, vertexCount: patch.vertexCount, texture: null };
     const id = node + 1;
     mesh.onBeforeRender = (_r, _s, _c, _g, material) => {
+      if (material === this.material) {
+        // The shared material's texture uniforms follow the mesh drawn (uploaded on change).
+        const u = material.uniforms;
+        const tex = mesh.userData.texture;
+        const map = tex || this.noTexture;
+        const on = tex ? 1 : 0;
+        if (u.uMap.value !== map || u.uTextured.value !== on) {
+          u.uMap.value = map;
+          u.uTextured.value = on;
+          material.uniformsNeedUpdate = true;
+        }
+        return;
+      }
       if (material !== this.idMaterial) return;
       material.uniforms.uId.value.set(((id >> 16) & 255) / 255, ((id >> 8) & 255) / 255, (id & 255) / 255);
       material.uniformsNeedUpdate = true;
     };
     this.scene.add(mesh);
     this.meshes.set(node, mesh);
+    if (textured) this.loadTexture(node, mesh, patch.image);
     return mesh;
+  }
+
+  /** Decodes a patch's atlas (JPEG bytes) and gives it to its mesh, if still resident. */
+  async loadTexture(node, mesh, bytes) {
+    let bitmap;
+    try {
+      // The texels as stored: no colour management (sRGB bytes, like vertex colours).
+      bitmap = await createImageBitmap(new Blob([bytes], { type: 'image/jpeg' }), { premultiplyAlpha: 'none', colorSpaceConversion: 'none' });
+    } catch (e) {
+      console.warn(`meshwiki viewer: texture of patch ${node}:`, (e && e.message) || e);
+      return;
+    }
+    if (this.meshes.get(node) !== mesh) {
+      // Evicted (or the view disposed) while decoding.
+      bitmap.close();
+      return;
+    }
+    mesh.userData.texture = atlasTexture(bitmap);
+    this.onChange();
   }
 
   removePatch(node) {
@@ -159,6 +237,20 @@ export class SceneView {
     if (!mesh) return;
     this.scene.remove(mesh);
     mesh.geometry.dispose();
+    const tex = mesh.userData.texture;
+    if (tex) {
+      const u = this.material.uniforms;
+      if (u.uMap.value === tex) {
+        // Never bind a disposed texture again (three would upload it anew).
+        u.uMap.value = this.noTexture;
+        u.uTextured.value = 0;
+        this.material.uniformsNeedUpdate = true;
+      }
+      tex.dispose();
+      // Never uploaded (evicted before it was drawn): its bitmap is still open.
+      if (tex.image && tex.image.width > 0 && typeof tex.image.close === 'function') tex.image.close();
+      mesh.userData.texture = null;
+    }
     this.meshes.delete(node);
   }
 
@@ -248,6 +340,7 @@ export class SceneView {
   dispose() {
     for (const node of [...this.meshes.keys()]) this.removePatch(node);
     this.material.dispose();
+    this.noTexture.dispose();
     this.idMaterial.dispose();
     if (this.visTarget) this.visTarget.dispose();
     this.outline.dispose();

@@ -1,0 +1,710 @@
+//! Per-patch texture atlases (issue 11, item 2): every patch at every level carries its own
+//! texture. Leaves cut theirs from the scan's textures through the source texture
+//! coordinates; coarse patches resample theirs from the finer patches they replace (the
+//! closest point on the finer surface, [`super::nearest`]), so colour stays right whatever
+//! the simplification moved, and no UV seam of the source constrains the simplifier (the
+//! fragmented photogrammetry atlases that keep Nexus' top levels at millions of triangles do
+//! not arise: charts are made afresh for every patch).
+//!
+//! 1. **Charts**: region growing over the patch's triangle adjacency from the largest
+//!    unassigned triangle; a neighbour joins while its normal stays within ~40° of the chart's
+//!    area-weighted mean normal. A chart is projected orthogonally onto the plane of that
+//!    normal (every triangle keeps its orientation, so nothing folds) and turned to its
+//!    principal axes for a tight rectangle.
+//! 2. **Packing**: rectangles with a gutter of [`GUTTER`] texels on every side, tallest first
+//!    on shelves; the texel size shrinks (coarser texels) until the atlas fits
+//!    [`MAX_TEXELS`].
+//! 3. **Baking**: every texel whose centre lies in a triangle samples the colour source at
+//!    its barycentric coordinates (2×2 supersampled when resampling a finer surface, a box
+//!    filter for the halved density); every triangle owns at least the texel of its
+//!    centroid; [`GUTTER`] dilation passes then fill the gutter from the chart itself, so
+//!    bilinear filtering never mixes in another chart, and the rest takes the mean colour
+//!    (cheap for JPEG).
+//!
+//! Texel size follows the patch's error (`build.rs`): a patch is drawn while its error
+//! projects to at most a pixel, so texels of that size keep a texel per pixel or better.
+
+use super::nearest::Nearest;
+use crate::mesh::{SourceTexture, Texture, TexturedFace, Wrap, encode_rgba, srgb_to_linear};
+use glam::{Vec2, Vec3};
+use rustc_hash::FxHashMap as HashMap;
+
+/// Texels of gutter around each chart.
+pub const GUTTER: u32 = 2;
+/// Most texels of one patch's atlas (2048²): bounds the build's memory per patch.
+pub const MAX_TEXELS: u64 = 1 << 22;
+/// Longest atlas side.
+pub const MAX_SIDE: u32 = 4096;
+/// A triangle joins a chart while its normal is within this cosine of the chart's mean.
+const CHART_COS: f32 = 0.766;
+
+/// A patch's atlas: the image and every triangle corner's coordinates in it.
+pub struct PatchTexture {
+    /// sRGB RGBA8.
+    pub image: Texture,
+    /// Per corner (three per triangle of the patch), in [0, 1], `v = 0` at the top row.
+    pub uvs: Vec<[f32; 2]>,
+    /// World units per texel.
+    pub texel_size: f32,
+}
+
+impl PatchTexture {
+    /// Linear RGBA at barycentric `bary` of triangle `tri`.
+    pub fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4] {
+        let uv = interpolate2(&self.uvs[tri * 3..tri * 3 + 3], bary);
+        self.image.sample(uv[0], uv[1], Wrap::Clamp, Wrap::Clamp)
+    }
+}
+
+/// Where a baked texel's colour comes from.
+pub trait ColorSource {
+    /// Linear RGBA of the surface at barycentric `bary` of triangle `tri` of the patch baked.
+    fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4];
+}
+
+/// Charts packed into an atlas: its size and every corner's position in texels.
+#[derive(Debug, Clone)]
+pub struct Layout {
+    pub width: u32,
+    pub height: u32,
+    /// Per corner, in texels from the top-left corner of the atlas.
+    pub corners: Vec<Vec2>,
+    pub texel_size: f32,
+    pub charts: usize,
+}
+
+/// Charts and packs the triangles `indices` over `positions` at `texel_size` world units per
+/// texel (made coarser if the atlas would exceed [`MAX_TEXELS`] or [`MAX_SIDE`]).
+pub fn layout(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Layout {
+    let charts = make_charts(positions, indices);
+    let mut size = if texel_size.is_finite() && texel_size > 0.0 {
+        texel_size
+    } else {
+        1.0
+    };
+    loop {
+        let packed = pack(positions, indices, &charts, size);
+        let texels = packed.width as u64 * packed.height as u64;
+        if (texels <= MAX_TEXELS && packed.width.max(packed.height) <= MAX_SIDE) || size > 1e30 {
+            return packed;
+        }
+        let over = (texels as f64 / MAX_TEXELS as f64)
+            .max(packed.width.max(packed.height) as f64 / MAX_SIDE as f64)
+            .max(1.01);
+        size *= (over.sqrt() * 1.02) as f32;
+    }
+}
+
+/// A chart: its triangles and the plane it is projected onto.
+struct Chart {
+    triangles: Vec<u32>,
+    /// In-plane axes (unit, orthogonal).
+    u: Vec3,
+    v: Vec3,
+}
+
+fn make_charts(positions: &[[f32; 3]], indices: &[u32]) -> Vec<Chart> {
+    let t = indices.len() / 3;
+    let p = |i: u32| Vec3::from(positions[i as usize]);
+    let mut normals = Vec::with_capacity(t);
+    let mut areas = Vec::with_capacity(t);
+    for tri in indices.chunks_exact(3) {
+        let c = (p(tri[1]) - p(tri[0])).cross(p(tri[2]) - p(tri[0]));
+        areas.push(c.length() * 0.5);
+        normals.push(c.normalize_or_zero());
+    }
+    // Manifold edges (used by exactly two triangles) join those two.
+    let mut edges: HashMap<(u32, u32), [u32; 3]> = HashMap::default();
+    for (k, tri) in indices.chunks_exact(3).enumerate() {
+        for e in 0..3 {
+            let (a, b) = (tri[e], tri[(e + 1) % 3]);
+            let slot = edges.entry((a.min(b), a.max(b))).or_insert([u32::MAX; 3]);
+            match slot[2] {
+                u32::MAX => *slot = [k as u32, u32::MAX, 1],
+                1 => *slot = [slot[0], k as u32, 2],
+                n => slot[2] = n + 1,
+            }
+        }
+    }
+    let mut neighbours: Vec<[u32; 3]> = vec![[u32::MAX; 3]; t];
+    for (k, tri) in indices.chunks_exact(3).enumerate() {
+        for e in 0..3 {
+            let (a, b) = (tri[e], tri[(e + 1) % 3]);
+            if let Some(&[first, second, 2]) = edges.get(&(a.min(b), a.max(b))) {
+                neighbours[k][e] = if first == k as u32 { second } else { first };
+            }
+        }
+    }
+    let mut order: Vec<u32> = (0..t as u32).collect();
+    order.sort_by(|&a, &b| areas[b as usize].total_cmp(&areas[a as usize]));
+    let mut chart_of = vec![u32::MAX; t];
+    let mut charts = Vec::new();
+    let mut queue = std::collections::VecDeque::new();
+    for &seed in &order {
+        if chart_of[seed as usize] != u32::MAX {
+            continue;
+        }
+        let id = charts.len() as u32;
+        let mut sum = normals[seed as usize] * areas[seed as usize].max(1e-30);
+        let mut members = vec![seed];
+        chart_of[seed as usize] = id;
+        queue.clear();
+        queue.push_back(seed);
+        while let Some(f) = queue.pop_front() {
+            for &nb in &neighbours[f as usize] {
+                if nb == u32::MAX || chart_of[nb as usize] != u32::MAX {
+                    continue;
+                }
+                let mean = sum.normalize_or_zero();
+                let n = normals[nb as usize];
+                // Degenerate triangles join anything next to them.
+                if n != Vec3::ZERO && n.dot(mean) < CHART_COS {
+                    continue;
+                }
+                chart_of[nb as usize] = id;
+                sum += n * areas[nb as usize];
+                members.push(nb);
+                queue.push_back(nb);
+            }
+        }
+        let mut axis = sum.normalize_or_zero();
+        if axis == Vec3::ZERO {
+            axis = Vec3::Z;
+        }
+        // Triangles that drifted to face away from the final axis start charts of their own.
+        let (kept, dropped): (Vec<u32>, Vec<u32>) = members
+            .into_iter()
+            .partition(|&f| f == seed || normals[f as usize].dot(axis) > 0.2);
+        for f in dropped {
+            chart_of[f as usize] = u32::MAX;
+        }
+        let (u, v) = plane_axes(axis, &kept, indices, positions);
+        charts.push(Chart {
+            triangles: kept,
+            u,
+            v,
+        });
+    }
+    // Triangles dropped from a chart after its growth: one chart each, or with neighbours.
+    for f in 0..t as u32 {
+        if chart_of[f as usize] == u32::MAX {
+            let n = normals[f as usize];
+            let axis = if n == Vec3::ZERO { Vec3::Z } else { n };
+            chart_of[f as usize] = charts.len() as u32;
+            let (u, v) = plane_axes(axis, &[f], indices, positions);
+            charts.push(Chart {
+                triangles: vec![f],
+                u,
+                v,
+            });
+        }
+    }
+    charts
+}
+
+/// In-plane axes for a chart projected along `axis`: the principal axes of its vertices.
+fn plane_axes(axis: Vec3, tris: &[u32], indices: &[u32], positions: &[[f32; 3]]) -> (Vec3, Vec3) {
+    let (u0, v0) = axis.any_orthonormal_pair();
+    let mut pts: Vec<Vec2> = Vec::with_capacity(tris.len() * 3);
+    for &f in tris {
+        for k in 0..3 {
+            let q = Vec3::from(positions[indices[f as usize * 3 + k] as usize]);
+            pts.push(Vec2::new(q.dot(u0), q.dot(v0)));
+        }
+    }
+    let n = pts.len().max(1) as f32;
+    let mean = pts.iter().copied().sum::<Vec2>() / n;
+    let (mut cxx, mut cyy, mut cxy) = (0.0f32, 0.0f32, 0.0f32);
+    for q in &pts {
+        let d = *q - mean;
+        cxx += d.x * d.x;
+        cyy += d.y * d.y;
+        cxy += d.x * d.y;
+    }
+    let angle = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+    let (s, c) = angle.sin_cos();
+    let u = (u0 * c + v0 * s).normalize_or_zero();
+    let v = axis.cross(u).normalize_or_zero();
+    if u == Vec3::ZERO || v == Vec3::ZERO {
+        (u0, v0)
+    } else {
+        (u, v)
+    }
+}
+
+fn pack(positions: &[[f32; 3]], indices: &[u32], charts: &[Chart], texel_size: f32) -> Layout {
+    let scale = 1.0 / texel_size;
+    let mut corners = vec![Vec2::ZERO; indices.len()];
+    // Chart-local texel coordinates and rectangle sizes.
+    let mut rects: Vec<(u32, u32, usize)> = Vec::with_capacity(charts.len());
+    for (ci, chart) in charts.iter().enumerate() {
+        let (mut lo, mut hi) = (Vec2::splat(f32::MAX), Vec2::splat(f32::MIN));
+        for &f in &chart.triangles {
+            for k in 0..3 {
+                let c = f as usize * 3 + k;
+                let q = Vec3::from(positions[indices[c] as usize]);
+                let uv = Vec2::new(q.dot(chart.u), q.dot(chart.v)) * scale;
+                corners[c] = uv;
+                lo = lo.min(uv);
+                hi = hi.max(uv);
+            }
+        }
+        let offset = Vec2::splat(GUTTER as f32 + 0.5) - lo;
+        for &f in &chart.triangles {
+            for k in 0..3 {
+                corners[f as usize * 3 + k] += offset;
+            }
+        }
+        let ext = (hi - lo).max(Vec2::ZERO);
+        let w = (ext.x.ceil() as u32).saturating_add(2 * GUTTER + 1);
+        let h = (ext.y.ceil() as u32).saturating_add(2 * GUTTER + 1);
+        rects.push((w, h, ci));
+    }
+    rects.sort_by(|a, b| b.1.cmp(&a.1).then(b.0.cmp(&a.0)));
+    let area: f64 = rects.iter().map(|r| r.0 as f64 * r.1 as f64).sum();
+    let widest = rects.iter().map(|r| r.0).max().unwrap_or(1);
+    let width = ((area.sqrt() * 1.1).ceil() as u32).max(widest).max(1);
+    let (mut x, mut y, mut shelf) = (0u32, 0u32, 0u32);
+    let mut origin = vec![(0u32, 0u32); charts.len()];
+    for &(w, h, ci) in &rects {
+        if x + w > width {
+            y = y.saturating_add(shelf);
+            x = 0;
+            shelf = 0;
+        }
+        origin[ci] = (x, y);
+        x += w;
+        shelf = shelf.max(h);
+    }
+    let height = y.saturating_add(shelf).max(1);
+    for (ci, chart) in charts.iter().enumerate() {
+        let o = Vec2::new(origin[ci].0 as f32, origin[ci].1 as f32);
+        for &f in &chart.triangles {
+            for k in 0..3 {
+                corners[f as usize * 3 + k] += o;
+            }
+        }
+    }
+    Layout {
+        width,
+        height,
+        corners,
+        texel_size,
+        charts: charts.len(),
+    }
+}
+
+/// Bakes `source` into the atlas `layout` of triangles `tri_count` (corner order as in the
+/// layout). `supersample`: average 2×2 samples per texel.
+pub fn bake(layout: &Layout, source: &dyn ColorSource, supersample: bool) -> PatchTexture {
+    let (w, h) = (layout.width as usize, layout.height as usize);
+    let mut texels = vec![[0f32; 4]; w * h];
+    let mut filled = vec![false; w * h];
+    let offsets: &[Vec2] = if supersample {
+        &[
+            Vec2::new(-0.25, -0.25),
+            Vec2::new(0.25, -0.25),
+            Vec2::new(-0.25, 0.25),
+            Vec2::new(0.25, 0.25),
+        ]
+    } else {
+        &[Vec2::ZERO]
+    };
+    for (tri, c) in layout.corners.chunks_exact(3).enumerate() {
+        let (c0, c1, c2) = (c[0], c[1], c[2]);
+        let d = (c1.y - c2.y) * (c0.x - c2.x) + (c2.x - c1.x) * (c0.y - c2.y);
+        let bary = |p: Vec2| -> [f32; 3] {
+            if d.abs() < 1e-12 {
+                return [1.0 / 3.0; 3];
+            }
+            let b0 = ((c1.y - c2.y) * (p.x - c2.x) + (c2.x - c1.x) * (p.y - c2.y)) / d;
+            let b1 = ((c2.y - c0.y) * (p.x - c2.x) + (c0.x - c2.x) * (p.y - c2.y)) / d;
+            [b0, b1, 1.0 - b0 - b1]
+        };
+        let value = |p: Vec2| {
+            let mut acc = [0f32; 4];
+            for o in offsets {
+                let s = source.sample(tri, bary(p + *o));
+                for k in 0..4 {
+                    acc[k] += s[k];
+                }
+            }
+            let n = offsets.len() as f32;
+            acc.map(|a| a / n)
+        };
+        let lo = c0.min(c1).min(c2).floor().max(Vec2::ZERO);
+        let hi = c0.max(c1).max(c2).ceil();
+        let (x0, y0) = (lo.x as usize, lo.y as usize);
+        let (x1, y1) = ((hi.x as usize).min(w), (hi.y as usize).min(h));
+        for y in y0..y1 {
+            for x in x0..x1 {
+                if filled[y * w + x] || d.abs() < 1e-12 {
+                    continue;
+                }
+                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                let b = bary(p);
+                if b.iter().all(|&v| v >= -1e-5) {
+                    texels[y * w + x] = value(p);
+                    filled[y * w + x] = true;
+                }
+            }
+        }
+        // Every triangle owns at least the texel of its centroid.
+        let centroid = (c0 + c1 + c2) / 3.0;
+        let (x, y) = (
+            (centroid.x.max(0.0) as usize).min(w - 1),
+            (centroid.y.max(0.0) as usize).min(h - 1),
+        );
+        if !filled[y * w + x] {
+            texels[y * w + x] = value(centroid);
+            filled[y * w + x] = true;
+        }
+    }
+    dilate(&mut texels, &mut filled, w, h, GUTTER as usize);
+    let image = Texture::from_texels(
+        layout.width,
+        layout.height,
+        texels.into_iter().map(encode_rgba).collect(),
+    )
+    .unwrap_or_else(|| Texture::from_texels(1, 1, vec![[255; 4]]).expect("a 1x1 image is valid"));
+    let (fw, fh) = (layout.width as f32, layout.height as f32);
+    PatchTexture {
+        image,
+        uvs: layout
+            .corners
+            .iter()
+            .map(|c| [c.x / fw, c.y / fh])
+            .collect(),
+        texel_size: layout.texel_size,
+    }
+}
+
+/// `passes` rounds of filling empty texels with the mean of their filled 8-neighbours, then
+/// the mean colour everywhere still empty.
+fn dilate(texels: &mut [[f32; 4]], filled: &mut [bool], w: usize, h: usize, passes: usize) {
+    for _ in 0..passes {
+        let before = filled.to_vec();
+        let mut changed = false;
+        for y in 0..h {
+            for x in 0..w {
+                if before[y * w + x] {
+                    continue;
+                }
+                let mut acc = [0f32; 4];
+                let mut n = 0;
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                            continue;
+                        }
+                        let i = ny as usize * w + nx as usize;
+                        if before[i] {
+                            for k in 0..4 {
+                                acc[k] += texels[i][k];
+                            }
+                            n += 1;
+                        }
+                    }
+                }
+                if n > 0 {
+                    texels[y * w + x] = acc.map(|a| a / n as f32);
+                    filled[y * w + x] = true;
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    let mut mean = [0f64; 4];
+    let mut n = 0u64;
+    for (t, &f) in texels.iter().zip(filled.iter()) {
+        if f {
+            for k in 0..4 {
+                mean[k] += t[k] as f64;
+            }
+            n += 1;
+        }
+    }
+    let mean = if n == 0 {
+        [1.0; 4]
+    } else {
+        mean.map(|m| (m / n as f64) as f32)
+    };
+    for (t, f) in texels.iter_mut().zip(filled.iter()) {
+        if !f {
+            *t = mean;
+        }
+    }
+}
+
+fn interpolate2(c: &[[f32; 2]], b: [f32; 3]) -> [f32; 2] {
+    [
+        c[0][0] * b[0] + c[1][0] * b[1] + c[2][0] * b[2],
+        c[0][1] * b[0] + c[1][1] * b[1] + c[2][1] * b[2],
+    ]
+}
+
+/// World units per texel of a leaf that keeps its source texture's resolution: the square root
+/// of its surface area over its area in source texels (`None` without textured triangles).
+pub fn source_texel_size(
+    positions: &[[f32; 3]],
+    indices: &[u32],
+    faces: &[TexturedFace],
+    textures: &[SourceTexture],
+) -> Option<f32> {
+    let (mut world, mut texels) = (0f64, 0f64);
+    for (tri, face) in indices.chunks_exact(3).zip(faces) {
+        let Some(tex) = textures.get(face.texture as usize) else {
+            continue;
+        };
+        let p = |k: usize| Vec3::from(positions[tri[k] as usize]);
+        world += ((p(1) - p(0)).cross(p(2) - p(0)).length() * 0.5) as f64;
+        let (tw, th) = (tex.image.width() as f64, tex.image.height() as f64);
+        let q = |k: usize| (face.uv[k][0] as f64 * tw, face.uv[k][1] as f64 * th);
+        let (a, b, c) = (q(0), q(1), q(2));
+        let area = ((b.0 - a.0) * (c.1 - a.1) - (c.0 - a.0) * (b.1 - a.1)).abs() * 0.5;
+        if area.is_finite() {
+            texels += area;
+        }
+    }
+    (world > 0.0 && texels > 0.0).then(|| (world / texels).sqrt() as f32)
+}
+
+/// Colour of a leaf: the scan's textures at the corners' source coordinates, or the vertex
+/// colours for triangles without texture.
+pub struct SourceColors<'a> {
+    pub indices: &'a [u32],
+    /// sRGB vertex colours (empty: white).
+    pub colors: &'a [[u8; 4]],
+    pub faces: &'a [TexturedFace],
+    pub textures: &'a [SourceTexture],
+}
+
+impl ColorSource for SourceColors<'_> {
+    fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4] {
+        if let Some(face) = self.faces.get(tri)
+            && let Some(tex) = self.textures.get(face.texture as usize)
+        {
+            return tex.sample(interpolate2(&face.uv, bary));
+        }
+        let mut acc = [0f32; 4];
+        for (k, &weight) in bary.iter().enumerate() {
+            let c = self
+                .indices
+                .get(tri * 3 + k)
+                .and_then(|&v| self.colors.get(v as usize))
+                .copied()
+                .unwrap_or([255; 4]);
+            let l = [
+                srgb_to_linear(c[0]),
+                srgb_to_linear(c[1]),
+                srgb_to_linear(c[2]),
+                c[3] as f32 / 255.0,
+            ];
+            for i in 0..4 {
+                acc[i] += l[i] * weight;
+            }
+        }
+        acc
+    }
+}
+
+/// Colour of a coarse patch: the finer patches it replaces, at the closest point of their
+/// surface that faces the same way.
+pub struct Resampled<'a> {
+    positions: &'a [[f32; 3]],
+    indices: &'a [u32],
+    /// Per finer triangle (as indexed by `nearest`): its patch and its index there.
+    owners: Vec<(u32, u32)>,
+    finer: &'a [&'a PatchTexture],
+    nearest: Nearest,
+}
+
+impl<'a> Resampled<'a> {
+    /// `finer[i]` is the texture of the finer patch `(positions, indices)` = `surfaces[i]`.
+    pub fn new(
+        positions: &'a [[f32; 3]],
+        indices: &'a [u32],
+        surfaces: &[(&[[f32; 3]], &[u32])],
+        finer: &'a [&'a PatchTexture],
+    ) -> Resampled<'a> {
+        let mut tris = Vec::new();
+        let mut owners = Vec::new();
+        for (m, (pos, idx)) in surfaces.iter().enumerate() {
+            for (t, tri) in idx.chunks_exact(3).enumerate() {
+                tris.push([0, 1, 2].map(|k| Vec3::from(pos[tri[k] as usize])));
+                owners.push((m as u32, t as u32));
+            }
+        }
+        Resampled {
+            positions,
+            indices,
+            owners,
+            finer,
+            nearest: Nearest::new(tris),
+        }
+    }
+}
+
+impl ColorSource for Resampled<'_> {
+    fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4] {
+        let p = |k: usize| Vec3::from(self.positions[self.indices[tri * 3 + k] as usize]);
+        let (a, b, c) = (p(0), p(1), p(2));
+        let q = a * bary[0] + b * bary[1] + c * bary[2];
+        let n = (b - a).cross(c - a).normalize_or_zero();
+        let hit = self
+            .nearest
+            .closest(q, n, 0.0)
+            .or_else(|| self.nearest.closest(q, Vec3::ZERO, 0.0));
+        match hit {
+            Some(h) => {
+                let (m, t) = self.owners[h.triangle as usize];
+                self.finer[m as usize].sample(t as usize, h.bary)
+            }
+            None => [1.0; 4],
+        }
+    }
+}
+
+/// JPEG (baseline, 4:2:0, standard Huffman tables) of an atlas.
+pub fn encode_jpeg(image: &Texture, quality: u8) -> Vec<u8> {
+    let rgb: Vec<u8> = image
+        .texels()
+        .iter()
+        .flat_map(|t| [t[0], t[1], t[2]])
+        .collect();
+    let mut out = Vec::new();
+    let mut encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
+    encoder.set_sampling_factor(jpeg_encoder::SamplingFactor::F_2_2);
+    // Optimised Huffman tables (jpeg-encoder 0.6) come back garbled through `image`'s decoder
+    // (checked in the tests below): the standard tables cost a few per cent and decode.
+    let (w, h) = (image.width(), image.height());
+    match (u16::try_from(w), u16::try_from(h)) {
+        (Ok(w), Ok(h)) => {
+            if encoder
+                .encode(&rgb, w, h, jpeg_encoder::ColorType::Rgb)
+                .is_err()
+            {
+                out.clear();
+            }
+        }
+        _ => out.clear(),
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bumpy grid patch: positions and indices.
+    fn grid(n: usize) -> (Vec<[f32; 3]>, Vec<u32>) {
+        let mut pos = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+                pos.push([x, y, 0.3 * (x * 9.0).sin() * (y * 7.0).cos()]);
+            }
+        }
+        let mut idx = Vec::new();
+        let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                idx.extend([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                idx.extend([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        (pos, idx)
+    }
+
+    /// Colour as a function of position, to compare bakes against.
+    struct Field<'a>(&'a [[f32; 3]], &'a [u32]);
+    impl ColorSource for Field<'_> {
+        fn sample(&self, tri: usize, b: [f32; 3]) -> [f32; 4] {
+            let q = (0..3)
+                .map(|k| Vec3::from(self.0[self.1[tri * 3 + k] as usize]) * b[k])
+                .sum::<Vec3>();
+            [
+                q.x.fract().abs(),
+                q.y.fract().abs(),
+                (q.z + 0.5).clamp(0.0, 1.0),
+                1.0,
+            ]
+        }
+    }
+
+    #[test]
+    fn charts_cover_every_triangle_without_overlap_and_keep_orientation() {
+        let (pos, idx) = grid(24);
+        let l = layout(&pos, &idx, 0.004);
+        assert!(
+            l.charts > 1 && l.charts < idx.len() / 3,
+            "{} charts",
+            l.charts
+        );
+        // Rasterise every triangle's texel centres: no texel in two triangles.
+        let mut owner = vec![u32::MAX; (l.width * l.height) as usize];
+        for (t, c) in l.corners.chunks_exact(3).enumerate() {
+            let area = (c[1] - c[0]).perp_dot(c[2] - c[0]);
+            assert!(area >= 0.0, "triangle {t} flipped in the atlas");
+            for y in 0..l.height {
+                for x in 0..l.width {
+                    let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    let e = |a: Vec2, b: Vec2| (b - a).perp_dot(p - a);
+                    if e(c[0], c[1]) > 1e-3 && e(c[1], c[2]) > 1e-3 && e(c[2], c[0]) > 1e-3 {
+                        let o = &mut owner[(y * l.width + x) as usize];
+                        assert_eq!(*o, u32::MAX, "texel ({x}, {y}) in two triangles");
+                        *o = t as u32;
+                    }
+                }
+            }
+            for q in c {
+                assert!(q.x >= GUTTER as f32 && q.y >= GUTTER as f32);
+                assert!(q.x <= (l.width - GUTTER) as f32 && q.y <= (l.height - GUTTER) as f32);
+            }
+        }
+    }
+
+    #[test]
+    fn baked_atlas_reproduces_the_source_and_respects_the_budget() {
+        let (pos, idx) = grid(16);
+        let field = Field(&pos, &idx);
+        let l = layout(&pos, &idx, 0.005);
+        let tex = bake(&l, &field, false);
+        // Sampling the atlas at triangle interiors gives back the field (to 8-bit rounding and
+        // bilinear interpolation of a smooth field).
+        let mut worst = 0f32;
+        for t in 0..idx.len() / 3 {
+            for b in [[0.6, 0.2, 0.2], [0.2, 0.6, 0.2], [1.0 / 3.0; 3]] {
+                let (a, e) = (tex.sample(t, b), field.sample(t, b));
+                for k in 0..3 {
+                    worst = worst.max((a[k] - e[k]).abs());
+                }
+            }
+        }
+        assert!(worst < 0.06, "worst channel error {worst}");
+        // A tiny texel size is capped by the budget.
+        let big = layout(&pos, &idx, 1e-6);
+        assert!(big.width as u64 * big.height as u64 <= MAX_TEXELS);
+        assert!(big.texel_size > 1e-6);
+        let jpeg = encode_jpeg(&tex.image, 85);
+        let back = Texture::decode(&jpeg).expect("decodes");
+        assert_eq!((back.width(), back.height()), (l.width, l.height));
+        // The JPEG keeps the colours (mean channel error of a few levels).
+        let err: f64 = back
+            .texels()
+            .iter()
+            .zip(tex.image.texels())
+            .map(|(a, b)| {
+                (0..3)
+                    .map(|k| (a[k] as f64 - b[k] as f64).abs())
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / (3 * back.texels().len()) as f64;
+        assert!(err < 4.0, "mean JPEG error {err:.2} levels");
+    }
+}
