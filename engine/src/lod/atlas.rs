@@ -512,25 +512,21 @@ impl ColorSource for SourceColors<'_> {
     }
 }
 
-/// Colour of a coarse patch: the finer patches it replaces, at the closest point of their
-/// surface that faces the same way.
-pub struct Resampled<'a> {
-    positions: &'a [[f32; 3]],
-    indices: &'a [u32],
+/// The finer patches a group's products replace, with their atlases, indexed once for all
+/// the products' closest-point queries.
+pub struct FinerSurface<'a> {
     /// Per finer triangle (as indexed by `nearest`): its patch and its index there.
     owners: Vec<(u32, u32)>,
     finer: &'a [&'a PatchTexture],
     nearest: Nearest,
 }
 
-impl<'a> Resampled<'a> {
+impl<'a> FinerSurface<'a> {
     /// `finer[i]` is the texture of the finer patch `(positions, indices)` = `surfaces[i]`.
     pub fn new(
-        positions: &'a [[f32; 3]],
-        indices: &'a [u32],
         surfaces: &[(&[[f32; 3]], &[u32])],
         finer: &'a [&'a PatchTexture],
-    ) -> Resampled<'a> {
+    ) -> FinerSurface<'a> {
         let mut tris = Vec::new();
         let mut owners = Vec::new();
         for (m, (pos, idx)) in surfaces.iter().enumerate() {
@@ -539,14 +535,20 @@ impl<'a> Resampled<'a> {
                 owners.push((m as u32, t as u32));
             }
         }
-        Resampled {
-            positions,
-            indices,
+        FinerSurface {
             owners,
             finer,
             nearest: Nearest::new(tris),
         }
     }
+}
+
+/// Colour of a coarse patch `(positions, indices)`: the finer surface it replaces, at the
+/// closest point that faces the same way.
+pub struct Resampled<'a> {
+    pub positions: &'a [[f32; 3]],
+    pub indices: &'a [u32],
+    pub finer: &'a FinerSurface<'a>,
 }
 
 impl ColorSource for Resampled<'_> {
@@ -555,14 +557,15 @@ impl ColorSource for Resampled<'_> {
         let (a, b, c) = (p(0), p(1), p(2));
         let q = a * bary[0] + b * bary[1] + c * bary[2];
         let n = (b - a).cross(c - a).normalize_or_zero();
-        let hit = self
+        let surface = self.finer;
+        let hit = surface
             .nearest
             .closest(q, n, 0.0)
-            .or_else(|| self.nearest.closest(q, Vec3::ZERO, 0.0));
+            .or_else(|| surface.nearest.closest(q, Vec3::ZERO, 0.0));
         match hit {
             Some(h) => {
-                let (m, t) = self.owners[h.triangle as usize];
-                self.finer[m as usize].sample(t as usize, h.bary)
+                let (m, t) = surface.owners[h.triangle as usize];
+                surface.finer[m as usize].sample(t as usize, h.bary)
             }
             None => [1.0; 4],
         }

@@ -13,7 +13,7 @@
 //! patches live in scratch files between levels, and only a bucket or a group per worker is
 //! in memory at a time.
 
-use super::atlas::{self, PatchTexture, Resampled, SourceColors};
+use super::atlas::{self, FinerSurface, PatchTexture, Resampled, SourceColors};
 use super::bounds::{Sphere, merge_spheres, normal_cone, sphere_of_points};
 use super::buckets::{KdSplit, read_bucket, write_buckets};
 use super::codec::{self, Grid, PatchRef};
@@ -433,8 +433,8 @@ impl<'a> Builder<'a> {
                 _ => None,
             },
         };
-        let blob = codec::encode(&patch_ref, self.options.zstd_level);
-        let encoded_vertices = codec::encoded_vertex_count(&patch_ref) as u32;
+        let (blob, encoded_vertices) = codec::encode_counted(&patch_ref, self.options.zstd_level);
+        let encoded_vertices = encoded_vertices as u32;
         let blob_offset = self.blobs.append(&blob)?;
         let border = patch.border_edges();
         Ok(Stored {
@@ -961,11 +961,16 @@ fn coarse_atlases(
         .iter()
         .map(|m| (&m.positions[..], &m.indices[..]))
         .collect();
+    let surface = FinerSurface::new(&surfaces, &finer);
     products
         .iter()
         .map(|p| {
             let layout = atlas::layout(&p.positions, &p.indices, texel);
-            let source = Resampled::new(&p.positions, &p.indices, &surfaces, &finer);
+            let source = Resampled {
+                positions: &p.positions,
+                indices: &p.indices,
+                finer: &surface,
+            };
             Some(atlas::bake(&layout, &source, true))
         })
         .collect()

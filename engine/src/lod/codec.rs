@@ -436,6 +436,12 @@ fn get_varint(bytes: &[u8], at: &mut usize) -> Result<i64, CodecError> {
 /// Encodes a patch. Reorders vertices and triangles for cache efficiency and compression,
 /// which changes nothing a reader relies on: every vertex keeps its original ID.
 pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
+    encode_counted(patch, zstd_level).0
+}
+
+/// [`encode`], with the number of vertices the blob holds (more than the patch's where its
+/// texture's charts meet: its decoded vertex count).
+pub fn encode_counted(patch: &PatchRef<'_>, zstd_level: i32) -> (Vec<u8>, usize) {
     let Some((corner_uvs, image)) = patch.texture else {
         return encode_split(patch, None, zstd_level);
     };
@@ -455,29 +461,12 @@ pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
     )
 }
 
-/// Vertices a patch has once split at its texture's chart borders (its decoded vertex count).
-pub fn encoded_vertex_count(patch: &PatchRef<'_>) -> usize {
-    match patch.texture {
-        None => patch.grid_positions.len(),
-        Some((corner_uvs, _)) => {
-            let mut seen: rustc_hash::FxHashSet<(u32, [u16; 2])> = Default::default();
-            for (c, &v) in patch.indices.iter().enumerate() {
-                seen.insert((
-                    v,
-                    quantize_uv(corner_uvs.get(c).copied().unwrap_or([0.0; 2])),
-                ));
-            }
-            seen.len()
-        }
-    }
-}
-
 /// [`encode`] of a patch whose vertices are already one per texture coordinate (`uvs[v]`).
 fn encode_split(
     patch: &PatchRef<'_>,
     texture: Option<(&[[u16; 2]], &[u8])>,
     zstd_level: i32,
-) -> Vec<u8> {
+) -> (Vec<u8>, usize) {
     let vertex_count = patch.grid_positions.len();
     let mut indices = meshopt::optimize_vertex_cache(patch.indices, vertex_count);
     let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertex_count);
@@ -630,7 +619,7 @@ fn encode_split(
         blob.extend_from_slice(image);
     }
     blob.extend_from_slice(&body);
-    blob
+    (blob, used)
 }
 
 fn u32_at(bytes: &[u8], at: usize) -> Result<u32, CodecError> {
@@ -967,12 +956,12 @@ mod tests {
             shift: 3,
             texture: Some((&corner_uvs, &image)),
         };
-        let blob = encode(&patch, 3);
+        let (blob, vertices) = encode_counted(&patch, 3);
         let p = decode(&blob, &grid).expect("decodes");
         assert_eq!(p.image.as_deref(), Some(&image[..]));
         // One extra vertex per row on the chart border (x = 6 belongs to both halves).
         assert_eq!(p.positions.len(), 12 * 12 + 12);
-        assert_eq!(encoded_vertex_count(&patch), p.positions.len());
+        assert_eq!(vertices, p.positions.len());
         assert_eq!(p.uvs.len(), p.positions.len());
         for (k, &v) in p.indices.iter().enumerate() {
             let id = p.original_ids[v as usize];
