@@ -16,6 +16,7 @@ pub mod seed;
 pub mod store;
 pub mod terminal;
 pub mod throttle;
+pub mod upload_sessions;
 pub mod uploads;
 pub mod web;
 pub mod wiki;

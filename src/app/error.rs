@@ -43,6 +43,7 @@ impl From<crate::jobs::JobError> for AppError {
         match e {
             crate::jobs::JobError::Store(s) => AppError::Store(s),
             crate::jobs::JobError::Invalid(m) => AppError::Invalid(m),
+            crate::jobs::JobError::TooLarge(m) => AppError::TooLarge(m),
             crate::jobs::JobError::Io(e) => AppError::internal(e),
         }
     }

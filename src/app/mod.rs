@@ -14,7 +14,8 @@
 //! * [`selections`]: draft selections and their confirmation into parts;
 //! * [`events`]: the live-update bus;
 //! * [`views`]: best views and thumbnails of parts, in the background;
-//! * [`client`]: the limits and settings clients size their requests to.
+//! * [`client`]: the limits and settings clients size their requests to;
+//! * [`uploads`]: scans into the build queue (a `.zip` unpacked), resumable upload sessions.
 
 pub mod client;
 pub mod contents;
@@ -23,6 +24,7 @@ pub mod events;
 pub mod models;
 pub mod parts;
 pub mod selections;
+pub mod uploads;
 pub mod views;
 
 use std::sync::Arc;
@@ -58,6 +60,8 @@ pub struct App {
     pub selections: selections::Drafts,
     /// Failed logins, for back-off.
     pub logins: LoginThrottle,
+    /// Resumable scan uploads in progress.
+    pub uploads: crate::upload_sessions::Sessions,
 }
 
 /// Why the application could not start.
@@ -124,6 +128,10 @@ impl App {
             render,
             selections: selections::Drafts::default(),
             logins: LoginThrottle::default(),
+            uploads: crate::upload_sessions::Sessions::new(
+                &settings.uploads_dir(),
+                crate::upload_sessions::SESSION_LIFETIME,
+            ),
             jobs: Jobs::new(db.clone(), settings.clone(), Some(search.clone())),
             db,
             search,
@@ -155,6 +163,7 @@ impl App {
                 }
             }
         });
+        self.sweep_uploads(self.settings.upload_sweep);
         let views = views::PartViews::start(self);
         Ok(Background { _views: views })
     }

@@ -16,6 +16,7 @@
 //!   killed build left behind (`models/.<name>.build-<pid>`, `models/*.tmp-<pid>`, unclaimed
 //!   uploads) is removed. On shutdown running builds are stopped and queued again.
 
+pub mod archive;
 pub mod progress;
 pub mod thumbnail;
 
@@ -63,6 +64,9 @@ pub enum JobError {
     /// Invalid input.
     #[error("{0}")]
     Invalid(String),
+    /// Input larger than allowed.
+    #[error("{0}")]
+    TooLarge(String),
 }
 
 /// A change of a job, for live displays (`Jobs::subscribe`).

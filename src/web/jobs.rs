@@ -1,7 +1,7 @@
 //! Model uploads and build jobs.
 //!
 //! * `POST /api/v1/models/upload?title=&filename=[&description=]` (admin): the raw request
-//!   body is the scan, streamed to `uploads/` (never held in memory), then a model and its
+//!   body is the scan (or a `.zip` of it with the files it refers to), streamed to `uploads/` (never held in memory), then a model and its
 //!   build job are created (202 with both). The file name only supplies the extension (the
 //!   format); it is shown to users but never used as a path.
 //! * `GET /api/v1/jobs` (admin), `GET /api/v1/jobs/{id}` (anyone logged in),
@@ -11,7 +11,7 @@
 
 use actix_web::http::header;
 use actix_web::{HttpRequest, HttpResponse, web};
-use futures_util::{Stream, StreamExt};
+use futures_util::StreamExt;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 use utoipa::{IntoParams, ToSchema};
@@ -19,9 +19,11 @@ use utoipa::{IntoParams, ToSchema};
 use super::auth::Auth;
 use super::multipart;
 use super::{ApiError, AppState, PageQuery};
-use crate::jobs::{JobError, ReceivedScan, SCAN_EXTENSIONS, UploadTarget, scan_extension};
+use crate::app::uploads::ScanFor;
+use crate::jobs::archive::ReceivedFile;
+use crate::jobs::{JobError, SCAN_EXTENSIONS, scan_extension};
 use crate::store::jobs::{self, CancelOutcome, Job, JobStatus};
-use crate::store::models::{Model, NewModel};
+use crate::store::models::Model;
 use crate::store::users::Role;
 
 /// Mounts the routes (before `models`: `/api/v1/models/upload` must win over `/{id}`).
@@ -42,6 +44,7 @@ impl From<JobError> for ApiError {
         match e {
             JobError::Store(s) => s.into(),
             JobError::Invalid(m) => ApiError::bad(m),
+            JobError::TooLarge(m) => ApiError::PayloadTooLarge(m),
             JobError::Io(e) => ApiError::internal(format!("I/O: {e}")),
         }
     }
@@ -59,32 +62,6 @@ pub(crate) fn too_large(limit: u64) -> ApiError {
     ))
 }
 
-/// Streams `body` to a temporary file in `uploads/`, at most `limit` bytes.
-pub(crate) async fn receive_scan<S>(
-    state: &AppState,
-    body: S,
-    extension: String,
-    display_name: String,
-    limit: u64,
-) -> Result<ReceivedScan, ApiError>
-where
-    S: Stream<Item = Result<web::Bytes, ApiError>> + Unpin,
-{
-    let dir = state.settings.uploads_dir();
-    let spooled = multipart::spool(&dir, body, limit, false, || too_large(limit)).await?;
-    if spooled.bytes == 0 {
-        return Err(ApiError::bad("the upload is empty"));
-    }
-    Ok(ReceivedScan {
-        temp: spooled.temp,
-        bytes: spooled.bytes,
-        extension,
-        relative: display_name.clone(),
-        display_name,
-        companions: Vec::new(),
-    })
-}
-
 pub(crate) fn check_title(title: &str, max: usize) -> Result<String, ApiError> {
     let t = title.trim();
     let n = t.chars().count();
@@ -96,13 +73,15 @@ pub(crate) fn check_title(title: &str, max: usize) -> Result<String, ApiError> {
     Ok(t.to_string())
 }
 
-pub(crate) fn extension_of(filename: &str) -> Result<String, ApiError> {
-    scan_extension(filename).ok_or_else(|| {
-        ApiError::bad(format!(
-            "cannot tell the format of {:?}: the file name must end in {SCAN_EXTENSIONS}",
-            super::attachments::sanitize_name(filename)
-        ))
-    })
+/// Checks that an uploaded file's name tells a scan format (or a `.zip` of a scan).
+pub(crate) fn check_scan_name(filename: &str) -> Result<(), ApiError> {
+    if scan_extension(filename).is_some() || crate::jobs::archive::is_zip(filename) {
+        return Ok(());
+    }
+    Err(ApiError::bad(format!(
+        "cannot tell the format of {:?}: the file name must end in {SCAN_EXTENSIONS} (or .zip, holding the scan and the files it refers to)",
+        super::attachments::sanitize_name(filename)
+    )))
 }
 
 /// Query of the raw upload.
@@ -115,8 +94,9 @@ struct UploadQuery {
     /// cancelled) that gets this scan instead of a new model: a retry. 409 for a ready model
     /// or one whose build is queued or running.
     model: Option<i64>,
-    /// The scan's file name: only its extension (.ply, .obj, .gltf, .glb, .stl, .off) is
-    /// used, to pick the format; it is shown to users but never used as a path.
+    /// The scan's file name: only its extension (.ply, .obj, .gltf, .glb, .stl, .off, or .zip
+    /// for an archive of the scan and the files it refers to) is used, to pick the format; it
+    /// is shown to users but never used as a path.
     #[param(value_type = String, required = true)]
     filename: Option<String>,
     /// Description of the model (Markdown).
@@ -135,7 +115,8 @@ pub struct UploadedModel {
 
 /// Upload a scan and queue its LOD build
 ///
-/// The raw request body is the scan, streamed to disk (never held in memory); then a model
+/// The raw request body is the scan (or a `.zip` of the scan and the files it refers to,
+/// e.g. a glTF with its `.bin` and textures), streamed to disk (never held in memory); then a model
 /// (status `pending`) and its build job are created, or, with `model`, the build of that
 /// existing model is queued again with the new scan. The `Location` header names the job.
 #[utoipa::path(post, path = "/api/v1/models/upload", tag = "jobs",
@@ -173,7 +154,7 @@ async fn upload(
         .filename
         .as_deref()
         .ok_or_else(|| ApiError::bad("the filename query parameter is required (e.g. scan.ply)"))?;
-    let extension = extension_of(filename)?;
+    check_scan_name(filename)?;
     let limit = state.settings.build.upload_bytes;
     let declared = req
         .headers()
@@ -185,17 +166,24 @@ async fn upload(
     }
     let display = super::attachments::sanitize_name(filename);
     let body = payload.map(|c| c.map_err(|e| ApiError::bad(format!("upload interrupted: {e}"))));
-    let scan = receive_scan(&state, body, extension, display.clone(), limit).await?;
-    let model = NewModel {
-        title,
-        description: q.description.replace("\r\n", "\n"),
-        source_name: display,
+    let dir = state.settings.uploads_dir();
+    let spooled = multipart::spool(&dir, body, limit, false, || too_large(limit)).await?;
+    if spooled.bytes == 0 {
+        return Err(ApiError::bad("the upload is empty"));
+    }
+    let file = ReceivedFile {
+        relative: display,
+        temp: spooled.temp,
+        bytes: spooled.bytes,
     };
     let target = match q.model {
-        Some(id) => UploadTarget::Existing(id),
-        None => UploadTarget::New(&model),
+        Some(id) => ScanFor::Existing(id),
+        None => ScanFor::New {
+            title,
+            description: q.description.clone(),
+        },
     };
-    let (model, job) = state.jobs.submit_upload(scan, target, auth.id()).await?;
+    let (model, job) = state.submit_scan(vec![file], target, auth.id()).await?;
     Ok(HttpResponse::Accepted()
         .insert_header((header::LOCATION, format!("/api/v1/jobs/{}", job.id)))
         .json(UploadedModel { model, job }))

@@ -20,6 +20,7 @@ pub mod search;
 pub mod selections;
 pub mod session;
 pub mod static_files;
+pub mod uploads;
 pub mod users;
 pub mod vendor;
 
@@ -85,6 +86,7 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     session::configure(cfg);
     users::configure(cfg);
     jobs::configure(cfg);
+    uploads::configure(cfg);
     models::configure(cfg);
     lod::configure(cfg);
     parts::configure(cfg);

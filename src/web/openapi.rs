@@ -89,6 +89,7 @@ pub fn document() -> Value {
         super::session::Api::openapi(),
         super::users::Api::openapi(),
         super::jobs::Api::openapi(),
+        super::uploads::Api::openapi(),
         super::models::Api::openapi(),
         super::lod::Api::openapi(),
         super::parts::Api::openapi(),

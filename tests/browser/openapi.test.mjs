@@ -143,6 +143,23 @@ test('every operation answers as documented on a running server', { timeout: 600
     await new Promise((r) => setTimeout(r, 250));
   }
   await call('get', '/api/v1/jobs', {}, { expect: 200 });
+
+  // The same scan through a resumable upload session: a chunk, a stale chunk, the rest.
+  const bytes = readFileSync(scan);
+  const session = (await call('post', '/api/v1/uploads', {}, { json: { files: [{ path: 'relief.ply', size: bytes.length }] }, expect: 201 })).data;
+  const half = Math.floor(bytes.length / 2);
+  const chunk = (offset, data, expect) => call('patch', '/api/v1/uploads/{id}/files/{index}', { id: session.id, index: 0 }, {
+    body: data,
+    headers: { 'Content-Type': 'application/offset+octet-stream', 'Upload-Offset': String(offset) },
+    expect,
+  });
+  await chunk(0, bytes.subarray(0, half), 204);
+  await chunk(0, bytes.subarray(0, half), 409);
+  await chunk(half, bytes.subarray(half), 204);
+  await call('get', '/api/v1/uploads/{id}', { id: session.id }, { expect: 200 });
+  await call('post', '/api/v1/uploads/{id}/finish', { id: session.id }, { json: { title: 'Resumed relief' }, expect: 202 });
+  const dropped = (await call('post', '/api/v1/uploads', {}, { json: { files: [{ path: 'relief.ply', size: 10 }] }, expect: 201 })).data;
+  await call('delete', '/api/v1/uploads/{id}', { id: dropped.id }, { expect: 204 });
   await call('post', '/api/v1/jobs/{id}/cancel', { id: jobId }, { expect: 409 });
   await call('get', '/api/v1/audit', {}, { query: { limit: 5 }, expect: 200 });
 

@@ -1,11 +1,15 @@
 // Uploading a real scan through the web UI (issue 16, item 2): the Bali mask's glTF folder
 // (the .gltf, its .bin buffer and its texture image: three files) picked together on the jobs
-// page, sent with visible upload progress, built, and opened in the viewer. Without
-// ../shared/data a generated glTF with a separate buffer stands in.
+// page, sent with visible upload progress through a resumable upload session (one dropped
+// connection on the way, retried), built, and opened in the viewer; and a .zip of a scan,
+// cut off after its first chunk, the page closed, then picked again: the upload resumes where
+// it stopped and builds. Without ../shared/data a generated glTF with a separate buffer stands
+// in for the mask.
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { existsSync, mkdtempSync, readdirSync, rmSync, writeFileSync } from 'node:fs';
+import { existsSync, mkdtempSync, readFileSync, readdirSync, rmSync, writeFileSync } from 'node:fs';
+import { randomBytes } from 'node:crypto';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
@@ -66,6 +70,78 @@ function generatedGltf(dir, n = 120) {
   return [join(dir, 'grid.gltf'), join(dir, 'grid.bin')];
 }
 
+/** CRC-32 (IEEE) of `buf`, as zip records it. */
+function crc32(buf) {
+  let c;
+  let crc = 0xffffffff;
+  for (const b of buf) {
+    c = (crc ^ b) & 0xff;
+    for (let k = 0; k < 8; k++) c = c & 1 ? 0xedb88320 ^ (c >>> 1) : c >>> 1;
+    crc = (crc >>> 8) ^ c;
+  }
+  return (crc ^ 0xffffffff) >>> 0;
+}
+
+/** A zip archive (entries stored, not compressed) of `entries`: [name, bytes]. */
+function storedZip(entries) {
+  const parts = [];
+  const central = [];
+  let offset = 0;
+  for (const [name, data] of entries) {
+    const n = Buffer.from(name);
+    const crc = crc32(data);
+    const local = Buffer.alloc(30);
+    local.writeUInt32LE(0x04034b50, 0);
+    local.writeUInt16LE(20, 4);
+    local.writeUInt32LE(crc, 14);
+    local.writeUInt32LE(data.length, 18);
+    local.writeUInt32LE(data.length, 22);
+    local.writeUInt16LE(n.length, 26);
+    const dir = Buffer.alloc(46);
+    dir.writeUInt32LE(0x02014b50, 0);
+    dir.writeUInt16LE(20, 4);
+    dir.writeUInt16LE(20, 6);
+    dir.writeUInt32LE(crc, 16);
+    dir.writeUInt32LE(data.length, 20);
+    dir.writeUInt32LE(data.length, 24);
+    dir.writeUInt16LE(n.length, 28);
+    dir.writeUInt32LE(offset, 42);
+    parts.push(local, n, data);
+    central.push(dir, n);
+    offset += local.length + n.length + data.length;
+  }
+  const cd = Buffer.concat(central);
+  const end = Buffer.alloc(22);
+  end.writeUInt32LE(0x06054b50, 0);
+  end.writeUInt16LE(entries.length, 8);
+  end.writeUInt16LE(entries.length, 10);
+  end.writeUInt32LE(cd.length, 12);
+  end.writeUInt32LE(offset, 16);
+  return Buffer.concat([...parts, cd, end]);
+}
+
+/** Records what the upload form shows (the page navigates away when done). */
+async function recordProgress(page) {
+  await page.addInitScript(() => {
+    const seen = () => {
+      const bar = document.querySelector('progress[data-upload-progress]');
+      const status = document.querySelector('[data-upload-status]');
+      if (bar && !bar.hidden && bar.value > Number(sessionStorage.getItem('mw-progress') || -1)) {
+        sessionStorage.setItem('mw-progress', String(bar.value));
+      }
+      if (status && status.textContent) {
+        sessionStorage.setItem('mw-status', status.textContent);
+        const all = JSON.parse(sessionStorage.getItem('mw-statuses') || '[]');
+        if (all[all.length - 1] !== status.textContent) sessionStorage.setItem('mw-statuses', JSON.stringify([...all, status.textContent].slice(-200)));
+      }
+    };
+    setInterval(seen, 5);
+    document.addEventListener('DOMContentLoaded', () => {
+      new MutationObserver(seen).observe(document.body, { subtree: true, childList: true, characterData: true, attributes: true });
+    });
+  });
+}
+
 function scanFiles() {
   const bali = join(SHARED_MESHES, 'mask_bali_100k_textured_gltf');
   if (existsSync(bali)) {
@@ -76,33 +152,24 @@ function scanFiles() {
   return { files: generatedGltf(tmp), name: 'a generated glTF', scan: /\.gltf$/ };
 }
 
-test('a glTF with its buffer and texture uploads through the page, with progress, and opens', { timeout: 600_000 }, async (t) => {
+test('a glTF with its buffer and texture uploads through the page, with progress and a dropped connection, and opens', { timeout: 600_000 }, async (t) => {
   const { files, name } = scanFiles();
   t.diagnostic(`${name}: ${files.length} files`);
   const page = await browser.page();
-  // Record what the page shows while uploading (the page navigates away when done).
-  await page.addInitScript(() => {
-    const seen = () => {
-      const bar = document.querySelector('progress[data-upload-progress]');
-      const status = document.querySelector('[data-upload-status]');
-      if (bar && !bar.hidden && bar.value > Number(sessionStorage.getItem('mw-progress') || -1)) {
-        sessionStorage.setItem('mw-progress', String(bar.value));
-      }
-      if (status && status.textContent) sessionStorage.setItem('mw-status', status.textContent);
-    };
-    setInterval(seen, 5);
-    document.addEventListener('DOMContentLoaded', () => {
-      new MutationObserver(seen).observe(document.body, { subtree: true, childList: true, characterData: true, attributes: true });
-    });
-  });
+  await recordProgress(page);
   await login(page, server.base, ADMIN);
+  // The connection drops once, on the second chunk sent: the upload retries and goes on.
+  let chunks = 0;
+  await page.route('**/api/v1/uploads/*/files/*', (route) => (++chunks === 2 ? route.abort('connectionreset') : route.continue()));
   await page.goto(`${server.base}/admin/jobs`);
   await page.fill('input[name=title]', 'Uploaded mask');
   await page.setInputFiles('#scan-files', files);
   await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
-  const progress = await page.evaluate(() => ({ value: Number(sessionStorage.getItem('mw-progress')), status: sessionStorage.getItem('mw-status') }));
+  const progress = await page.evaluate(() => ({ value: Number(sessionStorage.getItem('mw-progress')), statuses: JSON.parse(sessionStorage.getItem('mw-statuses') || '[]') }));
   assert.equal(progress.value, 100, `the upload's progress reached 100 % (${JSON.stringify(progress)})`);
-  assert.match(progress.status || '', /Upload/, 'the progress was said in words');
+  assert.ok(progress.statuses.some((s) => /^Uploading: /.test(s)), `the progress was said in words: ${progress.statuses}`);
+  assert.ok(progress.statuses.some((s) => /Connection lost.*resumes where it stopped/.test(s)), `the dropped connection was said: ${progress.statuses}`);
+  assert.ok(chunks >= files.length + 1, `${chunks} chunks for ${files.length} files, one sent again`);
 
   const id = Number(new URL(page.url()).pathname.split('/').pop());
   const model = await poll(page, async (mid) => (await fetch(`/api/v1/models/${mid}`)).json(), (m) => m.status === 'ready' || m.status === 'failed', 300_000, id);
@@ -112,4 +179,51 @@ test('a glTF with its buffer and texture uploads through the page, with progress
   await page.goto(`${server.base}/models/${id}`);
   const stats = await waitViewer(page, (s) => s.triangles > 0);
   assert.ok(stats.triangles > 0, 'the viewer draws the uploaded scan');
+  await page.close();
+});
+
+test('a .zip cut off after its first chunk resumes when picked again after a reload, and builds', { timeout: 600_000 }, async () => {
+  const [gltf, bin] = generatedGltf(mkdtempSync(join(tmp, 'zip-')), 60);
+  // 20 MB of photographs the scan does not use: the archive takes three chunks.
+  const zip = storedZip([
+    ['grid/grid.gltf', readFileSync(gltf)],
+    ['grid/grid.bin', readFileSync(bin)],
+    ['grid/photos/unused.dat', randomBytes(20 << 20)],
+  ]);
+  const zipPath = join(tmp, 'grid.zip');
+  writeFileSync(zipPath, zip);
+  const page = await browser.page();
+  await recordProgress(page);
+  await login(page, server.base, ADMIN);
+  // The network fails for good after the first chunk.
+  let sent = 0;
+  await page.route('**/api/v1/uploads/*/files/*', (route) => (++sent === 1 ? route.continue() : route.abort('internetdisconnected')));
+  await page.goto(`${server.base}/admin/jobs`);
+  await page.fill('input[name=title]', 'Zipped grid');
+  await page.setInputFiles('#scan-files', zipPath);
+  await page.click('form[data-upload] button[type=submit]');
+  await poll(page, () => sessionStorage.getItem('mw-status') || '', (s) => /Connection lost/.test(s), 60_000);
+  const first = await poll(page, async () => {
+    const key = Object.keys(localStorage).find((k) => k.startsWith('meshwiki-upload:'));
+    if (!key) return null;
+    const r = await fetch(`/api/v1/uploads/${localStorage.getItem(key)}`);
+    return r.ok ? r.json() : null;
+  }, (s) => s && s.files[0].received > 0, 30_000);
+  assert.equal(first.files[0].received, first.chunk_size, 'the first chunk is held');
+
+  // The page is closed and opened again; the same file picked again resumes.
+  await page.unroute('**/api/v1/uploads/*/files/*');
+  await page.goto(`${server.base}/admin/jobs`);
+  await page.evaluate(() => sessionStorage.setItem('mw-statuses', '[]'));
+  await page.fill('input[name=title]', 'Zipped grid');
+  await page.setInputFiles('#scan-files', zipPath);
+  await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
+  const statuses = await page.evaluate(() => JSON.parse(sessionStorage.getItem('mw-statuses') || '[]'));
+  assert.ok(statuses.some((s) => /resumed at 8\.0 MB/.test(s)), `resumed, not started again: ${statuses}`);
+  const id = Number(new URL(page.url()).pathname.split('/').pop());
+  const model = await poll(page, async (mid) => (await fetch(`/api/v1/models/${mid}`)).json(), (m) => m.status === 'ready' || m.status === 'failed', 300_000, id);
+  assert.equal(model.status, 'ready', model.error);
+  assert.equal(model.source_name, 'grid.gltf');
+  assert.equal(model.triangle_count, 2 * 59 * 59);
+  await page.close();
 });

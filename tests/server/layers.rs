@@ -22,6 +22,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("blobs", 1),
     ("config", 0),
     ("uploads", 0),
+    ("upload_sessions", 0),
     ("throttle", 0),
     ("wiki", 0),
 ];

@@ -18,4 +18,5 @@ mod public;
 mod render;
 mod security;
 mod selection;
+mod uploads;
 mod viewer;

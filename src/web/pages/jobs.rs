@@ -10,17 +10,16 @@ use futures_util::StreamExt;
 
 use super::filters;
 use super::{CsrfOnly, Layout, redirect, render_status};
-use crate::jobs::{
-    Companion, MAX_SCAN_FILES, ReceivedScan, SCAN_EXTENSIONS, UploadTarget, companion_path,
-    scan_extension,
-};
+use crate::app::uploads::ScanFor;
+use crate::jobs::archive::ReceivedFile;
+use crate::jobs::{MAX_SCAN_FILES, SCAN_EXTENSIONS, companion_path};
 use crate::store::Page;
 use crate::store::jobs::{self, Job, JobStatus};
-use crate::store::models::{self, ModelStatus, NewModel};
+use crate::store::models::{self, ModelStatus};
 use crate::store::users::Role;
 use crate::web::auth::{PageAuth, PageForm};
-use crate::web::jobs::{check_title, extension_of};
-use crate::web::multipart::{Spooled, TextFields, multipart_error};
+use crate::web::jobs::check_title;
+use crate::web::multipart::{TextFields, multipart_error};
 use crate::web::{ApiError, AppState, PageError};
 
 /// Mounts the routes.
@@ -134,7 +133,7 @@ async fn page(state: web::Data<AppState>, auth: PageAuth) -> Result<HttpResponse
 
 /// The upload form as read.
 struct UploadForm {
-    scan: ReceivedScan,
+    files: Vec<ReceivedFile>,
     title: String,
     description: String,
     /// An existing model to give the scan (a retry).
@@ -142,7 +141,7 @@ struct UploadForm {
 }
 
 /// Reads the upload form: text fields (`csrf_token` first, `title`, `description`, or
-/// `model` for a retry) and one `file`, streamed to `uploads/`.
+/// `model` for a retry) and the files, streamed to `uploads/`.
 async fn receive_form(
     state: &AppState,
     auth: &PageAuth,
@@ -155,8 +154,8 @@ async fn receive_form(
         description: fields.remove("description").unwrap_or_default(),
     };
     match read {
-        Ok((scan, model)) => Ok(UploadForm {
-            scan,
+        Ok((files, model)) => Ok(UploadForm {
+            files,
             title: kept.title,
             description: kept.description,
             model,
@@ -165,19 +164,18 @@ async fn receive_form(
     }
 }
 
-/// [`receive_form`]'s reading: the text fields into `fields`, the files (one scan, and the
+/// [`receive_form`]'s reading: the text fields into `fields`, the files (one scan and the
 /// files it refers to: a glTF's `.bin` and textures, an OBJ's MTL and images, picked together
-/// or as their folder) and the model id.
+/// or as their folder; or one `.zip` of them) and the model id.
 async fn read_form(
     state: &AppState,
     auth: &PageAuth,
     mut form: Multipart,
     fields: &mut TextFields,
-) -> Result<(ReceivedScan, Option<i64>), ApiError> {
+) -> Result<(Vec<ReceivedFile>, Option<i64>), ApiError> {
     let limit = state.settings.build.upload_bytes;
     let dir = state.settings.uploads_dir();
-    // (relative path, received bytes), in the order sent; the scan is picked at the end.
-    let mut files: Vec<(String, Spooled)> = Vec::new();
+    let mut files: Vec<ReceivedFile> = Vec::new();
     let mut total = 0u64;
     while let Some(field) = form.next().await {
         let mut field = field.map_err(multipart_error)?;
@@ -219,48 +217,18 @@ async fn read_form(
             })
             .await?;
             total += spooled.bytes;
-            files.push((relative, spooled));
+            files.push(ReceivedFile {
+                relative,
+                temp: spooled.temp,
+                bytes: spooled.bytes,
+            });
         } else {
             fields.read(name, &mut field, 64 * 1024).await?;
         }
     }
-    let scans: Vec<usize> = (0..files.len())
-        .filter(|&i| scan_extension(&files[i].0).is_some())
-        .collect();
-    let main = match scans.as_slice() {
-        [i] => *i,
-        [] if files.is_empty() => return Err(ApiError::bad("choose a scan file to upload")),
-        [] => {
-            return Err(ApiError::bad(format!(
-                "none of the files is a scan: one must end in {SCAN_EXTENSIONS}"
-            )));
-        }
-        _ => {
-            return Err(ApiError::bad(
-                "upload one scan at a time (with the files it refers to)",
-            ));
-        }
-    };
-    let (relative, spooled) = files.remove(main);
-    if spooled.bytes == 0 {
-        return Err(ApiError::bad("the scan is empty"));
+    if files.is_empty() {
+        return Err(ApiError::bad("choose a scan file to upload"));
     }
-    let extension = extension_of(&relative)?;
-    let scan = ReceivedScan {
-        temp: spooled.temp,
-        bytes: spooled.bytes,
-        extension,
-        display_name: crate::web::attachments::sanitize_name(&relative),
-        relative,
-        companions: files
-            .into_iter()
-            .map(|(relative, s)| Companion {
-                relative,
-                temp: s.temp,
-                bytes: s.bytes,
-            })
-            .collect(),
-    };
     let model = match fields.get("model").map(str::trim).filter(|m| !m.is_empty()) {
         Some(m) => Some(
             m.parse::<i64>()
@@ -268,7 +236,7 @@ async fn read_form(
         ),
         None => None,
     };
-    Ok((scan, model))
+    Ok((files, model))
 }
 
 async fn page_upload(
@@ -287,7 +255,7 @@ async fn page_upload(
         }
     };
     let UploadForm {
-        scan,
+        files,
         title,
         description,
         model,
@@ -297,25 +265,17 @@ async fn page_upload(
         title: title.clone(),
         description: description.clone(),
     };
-    let new;
     let target = match model {
-        Some(id) => UploadTarget::Existing(id),
+        Some(id) => ScanFor::Existing(id),
         None => match check_title(&title, state.settings.limits.title_chars) {
-            Ok(title) => {
-                new = NewModel {
-                    title,
-                    description: description.replace("\r\n", "\n"),
-                    source_name: scan.display_name.clone(),
-                };
-                UploadTarget::New(&new)
-            }
+            Ok(title) => ScanFor::New { title, description },
             Err(e) => {
-                drop(scan);
+                drop(files);
                 return jobs_page(&state, &auth, StatusCode::BAD_REQUEST, e.message(), kept).await;
             }
         },
     };
-    match state.jobs.submit_upload(scan, target, auth.id()).await {
+    match state.submit_scan(files, target, auth.id()).await {
         Ok((model, _job)) => Ok(redirect(&format!("/models/{}", model.id))),
         Err(e) => {
             let e = ApiError::from(e);
