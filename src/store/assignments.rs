@@ -42,6 +42,9 @@ pub struct AssignedPart {
     pub model_id: i64,
     /// Model title.
     pub model_title: String,
+    /// The part's name as every page shows it: the title of the first information assigned to
+    /// it.
+    pub part_title: String,
     /// Part kind.
     #[schema(value_type = crate::store::parts::PartKind)]
     pub kind: String,
@@ -94,8 +97,10 @@ pub async fn contents_for_part(db: &Db, part_id: i64) -> Result<Vec<AssignedCont
 /// Parts a content is assigned to.
 pub async fn parts_for_content(db: &Db, content_id: i64) -> Result<Vec<AssignedPart>> {
     Ok(sqlx::query_as::<_, AssignedPart>(
-        "SELECT p.id, a.id AS assignment_id, p.model_id, m.title AS model_title, p.kind, a.position,
-         p.thumbnail_attachment_id, p.camera AS camera_json
+        "SELECT p.id, a.id AS assignment_id, p.model_id, m.title AS model_title,
+         (SELECT c.title FROM assignments f JOIN contents c ON c.id = f.content_id
+          WHERE f.part_id = p.id ORDER BY f.position, f.id LIMIT 1) AS part_title,
+         p.kind, a.position, p.thumbnail_attachment_id, p.camera AS camera_json
          FROM assignments a JOIN parts p ON p.id = a.part_id JOIN models m ON m.id = p.model_id
          WHERE a.content_id = ? ORDER BY m.id, p.id",
     )

@@ -62,6 +62,9 @@ pub struct ContentView {
     pub content: Content,
     /// Sanitised HTML of the body.
     pub html: String,
+    /// Whether to show the thumbnail beside the body: false without one, or when the body
+    /// already shows that image (a dropped picture is both), so no one sees it twice.
+    pub show_thumbnail: bool,
     /// Attachments, in order (absent in lists).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub attachments: Option<Vec<Attachment>>,
@@ -69,12 +72,20 @@ pub struct ContentView {
 
 impl ContentView {
     fn new(content: Content, attachments: Option<Vec<Attachment>>) -> ContentView {
+        let html = markdown::render(&content.body);
         ContentView {
-            html: markdown::render(&content.body),
+            show_thumbnail: show_thumbnail(content.thumbnail_attachment_id, &html),
+            html,
             content,
             attachments,
         }
     }
+}
+
+/// Whether a content's thumbnail `thumbnail` is shown beside its rendered body `html`: not
+/// when the body shows the same attachment already.
+pub fn show_thumbnail(thumbnail: Option<i64>, html: &str) -> bool {
+    thumbnail.is_some_and(|t| !html.contains(&format!("src=\"/api/v1/attachments/{t}/download\"")))
 }
 
 /// Body of `POST /api/v1/contents`.

@@ -9,6 +9,7 @@ use askama::Template;
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use super::layout::Layout;
 use crate::app::AppError;
 use crate::search::SearchError;
 use crate::store::StoreError;
@@ -307,12 +308,26 @@ impl std::fmt::Display for PageError {
     }
 }
 
+/// An HTML error page: the status and its message in the site's layout (the navigation of the
+/// visitor's session, which [`crate::web::pages::error_pages`] fills in).
 #[derive(Template)]
 #[template(path = "error.html")]
-struct ErrorPage<'a> {
-    status: u16,
-    reason: &'a str,
-    message: String,
+pub struct ErrorPage<'a> {
+    /// Layout (anonymous until the middleware knows the session).
+    pub layout: Layout,
+    /// Status code.
+    pub status: u16,
+    /// Its reason phrase.
+    pub reason: &'a str,
+    /// What went wrong.
+    pub message: String,
+}
+
+/// Marks a response as an HTML error page, for [`crate::web::pages::error_pages`].
+#[derive(Debug, Clone)]
+pub struct ErrorPageInfo {
+    /// What went wrong.
+    pub message: String,
 }
 
 impl ResponseError for PageError {
@@ -330,19 +345,25 @@ impl ResponseError for PageError {
                 .finish(),
             PageError::Api(e) => {
                 let status = e.status_code();
+                let reason = status.canonical_reason().unwrap_or("Error");
                 let page = ErrorPage {
+                    layout: Layout::anonymous(format!("{} {reason}", status.as_u16())),
                     status: status.as_u16(),
-                    reason: status.canonical_reason().unwrap_or("Error"),
+                    reason,
                     message: e.message(),
                 };
                 let mut resp = HttpResponse::build(status);
                 if let Some(secs) = e.retry_after() {
                     resp.insert_header((header::RETRY_AFTER, secs.to_string()));
                 }
-                match page.render() {
+                let mut resp = match page.render() {
                     Ok(html) => resp.content_type(ContentType::html()).body(html),
                     Err(_) => resp.body(e.message()),
-                }
+                };
+                resp.extensions_mut().insert(ErrorPageInfo {
+                    message: e.message(),
+                });
+                resp
             }
         }
     }

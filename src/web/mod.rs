@@ -8,7 +8,10 @@ pub mod client;
 pub mod contents;
 pub mod error;
 pub mod events;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod jobs;
+pub mod layout;
 pub mod lod;
 pub mod models;
 pub mod multipart;
@@ -181,6 +184,7 @@ pub async fn run(state: AppState, on_bound: impl FnOnce(&[SocketAddr])) -> std::
             )
             .configure(configure)
             .default_service(web::to(not_found))
+            .wrap(middleware::from_fn(pages::error_pages))
             .wrap(middleware::Compress::default())
             .wrap(security_headers())
             .wrap(middleware::from_fn(log_requests))

@@ -964,6 +964,44 @@ async fn callouts_json(
     }))
 }
 
+/// Parses query string `text` for every render route and checks what is accepted against
+/// `limits` (the oracle of the mutation test and of the fuzz target; panics on a violation).
+/// Returns (accepted, refused) parses.
+#[doc(hidden)]
+pub fn checked_query(text: &str, limits: &RenderSettings) -> (u32, u32) {
+    let Ok(query) = web::Query::<RenderQuery>::from_query(text) else {
+        return (0, 1);
+    };
+    let (mut accepted, mut refused) = (0, 0);
+    for route in [Route::Image, Route::Buffers, Route::Callouts] {
+        match Params::parse(&query, route, limits) {
+            Ok(p) => {
+                accepted += 1;
+                assert!(p.width >= 1 && p.width <= limits.max_side, "{text}");
+                assert!(p.height >= 1 && p.height <= limits.max_side, "{text}");
+                assert!(
+                    p.width as u64 * p.height as u64 <= limits.max_pixels,
+                    "{text}"
+                );
+                assert!(
+                    p.fovy.is_finite() && (1.0..=170.0).contains(&p.fovy),
+                    "{text}"
+                );
+                assert!(p.px.is_finite() && (0.25..=64.0).contains(&p.px), "{text}");
+                assert!(p.parts.len() <= MAX_PARTS, "{text}");
+                for v in [p.eye, p.target, p.up].into_iter().flatten() {
+                    assert!(v.is_finite(), "{text}");
+                }
+            }
+            Err(e) => {
+                refused += 1;
+                assert!(!e.message().is_empty(), "{text}");
+            }
+        }
+    }
+    (accepted, refused)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1035,36 +1073,9 @@ mod tests {
                 }
             }
             let text = String::from_utf8_lossy(&q).into_owned();
-            let Ok(query) = web::Query::<RenderQuery>::from_query(&text) else {
-                refused += 1;
-                continue;
-            };
-            for route in [Route::Image, Route::Buffers, Route::Callouts] {
-                match Params::parse(&query, route, &limits) {
-                    Ok(p) => {
-                        accepted += 1;
-                        assert!(p.width >= 1 && p.width <= limits.max_side, "{text}");
-                        assert!(p.height >= 1 && p.height <= limits.max_side, "{text}");
-                        assert!(
-                            p.width as u64 * p.height as u64 <= limits.max_pixels,
-                            "{text}"
-                        );
-                        assert!(
-                            p.fovy.is_finite() && (1.0..=170.0).contains(&p.fovy),
-                            "{text}"
-                        );
-                        assert!(p.px.is_finite() && (0.25..=64.0).contains(&p.px), "{text}");
-                        assert!(p.parts.len() <= MAX_PARTS, "{text}");
-                        for v in [p.eye, p.target, p.up].into_iter().flatten() {
-                            assert!(v.is_finite(), "{text}");
-                        }
-                    }
-                    Err(e) => {
-                        refused += 1;
-                        assert!(!e.message().is_empty(), "{text}");
-                    }
-                }
-            }
+            let (a, r) = checked_query(&text, &limits);
+            accepted += a;
+            refused += r;
         }
         println!("render queries: 10000 cases, {accepted} accepted, {refused} refused, 0 panics");
         assert!(accepted > 0 && refused > 0);

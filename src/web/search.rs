@@ -122,6 +122,8 @@ pub struct PartLink {
     pub model_id: i64,
     /// Model title.
     pub model_title: String,
+    /// The part's name: the title of its first information (as the viewer's callout shows it).
+    pub title: String,
     /// Part kind.
     pub kind: String,
     /// `/models/{model_id}?part={id}&q={query}`: the page opening the viewer on the part's best
@@ -185,6 +187,7 @@ pub async fn part_links(
             id: p.id,
             model_id: p.model_id,
             model_title: p.model_title,
+            title: p.part_title,
             kind: p.kind,
         })
         .collect())

@@ -68,6 +68,7 @@ pub const JS_MODULES: &[(&str, &str)] = js_modules![
     "select/raster.js",
     "select/session.js",
     "select/tools.js",
+    "viewer/drawer.js",
     "viewer/main.js",
     "viewer/navigation.js",
     "viewer/outline.js",

@@ -17,7 +17,7 @@ import { join } from 'node:path';
 import { searchTerms, variants } from '../../static/js/parts/match.js';
 import { noteTitle } from '../../static/js/select/assign.js';
 import { writeRelief } from './support/env.mjs';
-import { ADMIN, importScan, seedPart, startServer } from './support/server.mjs';
+import { ADMIN, homeDirection, importScan, seedPart, startServer } from './support/server.mjs';
 import { launch, login, poll, waitViewer } from './support/browser.mjs';
 import { capture } from './support/pixels.mjs';
 import { leafVertices, regionAt } from './support/regions.mjs';
@@ -143,6 +143,103 @@ describe('the information panel and the assign step on the real server', () => {
     await waitViewer(page, (s) => s.hovered === seeded.part.id, 10_000);
     await page.waitForTimeout(200);
     assert.ok(!(await preview.isVisible()), 'the hover card came back over the open part');
+    await page.close();
+  });
+
+  test('the view keeps its width: the panel is a drawer over it, resized by its handle; the view is the reader\'s to light and steer', async () => {
+    // The first patches are held back a moment: the view says it is loading and shows no
+    // callouts over an empty view.
+    const page = await browser.page();
+    await login(page, server.base, ADMIN);
+    let release;
+    const held = new Promise((r) => (release = r));
+    // Patches come one by one or as runs read from the file.
+    const patches = /\/api\/v1\/models\/\d+\/lod\/(patches\/\d+|file)$/;
+    await page.route(patches, async (route) => {
+      await held;
+      await route.continue().catch(() => {});
+    });
+    await page.goto(`${server.base}/models/${model.id}`);
+    await page.locator('.viewer-loading').waitFor({ state: 'visible', timeout: 30_000 });
+    assert.match(await page.locator('.viewer-loading').textContent(), /Loading the model/);
+    assert.equal(await page.locator('.viewer-overlay').isVisible(), false, 'callouts over an empty view');
+    release();
+    let s = await waitViewer(page, (v) => settled(v) && v.callouts.includes(seeded.part.id));
+    assert.equal(await page.locator('.viewer-loading').isVisible(), false);
+    assert.match(await page.locator('.viewer-status').textContent(), /^Sharp/, 'the status speaks plainly');
+    // The live view replaces the thumbnail beside it.
+    assert.equal(await page.locator('.model-thumb').count(), 0, 'the thumbnail repeats the live view');
+    // The first view is the side the thumbnail shows (the server's home view).
+    const home = await homeDirection(server.api, model.id);
+    const cam = await page.evaluate(() => window.meshwikiViewer.camera());
+    const dir = cam.eye.map((v, k) => v - cam.target[k]);
+    const cos = dir.reduce((a, v, k) => a + v * home[k], 0) / Math.hypot(...dir);
+    assert.ok(cos > 0.999, `the viewer opens on another side than the thumbnail: cos ${cos}`);
+
+    // The drawer: over the view, which keeps its width; callouts stay left of it.
+    const canvas = page.locator('.viewer-canvas');
+    const wide = await canvas.boundingBox();
+    await page.locator(`.callout[data-part-id="${seeded.part.id}"]`).click();
+    const panel = page.locator('.viewer-panel');
+    await panel.locator('.panel-content').waitFor({ timeout: 10_000 });
+    await page.waitForTimeout(300);
+    const after = await canvas.boundingBox();
+    assert.equal(Math.round(after.width), Math.round(wide.width), 'opening the panel narrowed the view');
+    const drawer = await panel.boundingBox();
+    assert.ok(Math.abs(drawer.x + drawer.width - (wide.x + wide.width)) < 2 && drawer.height >= wide.height - 2, `the panel is not a drawer over the view: ${JSON.stringify({ drawer, wide })}`);
+    await shot(page, 'drawer');
+    const labels = await page.locator('.callout:not([hidden])').evaluateAll((els) => els.map((e) => e.getBoundingClientRect().right));
+    assert.ok(labels.every((r) => r <= drawer.x + 1), `callouts under the drawer: ${labels} vs ${drawer.x}`);
+    // Its handle: a separator the keyboard moves; the width is kept.
+    const handle = page.getByRole('separator', { name: 'Resize the information panel' });
+    await handle.focus();
+    for (let k = 0; k < 3; k++) await page.keyboard.press('ArrowLeft');
+    const widened = await panel.boundingBox();
+    assert.ok(widened.width >= drawer.width + 90, `ArrowLeft did not widen the drawer: ${drawer.width} → ${widened.width}`);
+    assert.equal(Number(await handle.getAttribute('aria-valuenow')), Math.round(widened.width));
+    await page.reload();
+    await waitViewer(page, settled);
+    await page.locator(`.callout[data-part-id="${seeded.part.id}"]`).click();
+    await panel.locator('.panel-content').waitFor({ timeout: 10_000 });
+    assert.ok(Math.abs((await panel.boundingBox()).width - widened.width) < 2, 'the width was not kept');
+    await page.keyboard.press('Escape');
+    await panel.waitFor({ state: 'hidden', timeout: 5_000 });
+
+    // The keyboard steers the focused view: arrows turn it about the target, + zooms, Home resets.
+    await canvas.focus();
+    const c0 = await page.evaluate(() => window.meshwikiViewer.camera());
+    const dist = (c) => Math.hypot(...c.eye.map((v, k) => v - c.target[k]));
+    await page.keyboard.press('ArrowLeft');
+    const c1 = await page.evaluate(() => window.meshwikiViewer.camera());
+    assert.ok(Math.hypot(...c1.eye.map((v, k) => v - c0.eye[k])) > dist(c0) * 0.05, 'ArrowLeft did not turn the view');
+    assert.ok(Math.abs(dist(c1) - dist(c0)) < dist(c0) * 1e-3, 'turning changed the distance');
+    assert.deepEqual(c1.target, c0.target);
+    await page.keyboard.press('+');
+    const c2 = await page.evaluate(() => window.meshwikiViewer.camera());
+    assert.ok(dist(c2) < dist(c1) * 0.9, `+ did not zoom in: ${dist(c1)} → ${dist(c2)}`);
+    await page.keyboard.press('Shift+ArrowUp');
+    const c3 = await page.evaluate(() => window.meshwikiViewer.camera());
+    assert.notDeepEqual(c3.target, c2.target, 'Shift+arrow did not move the view');
+    await page.keyboard.press('Home');
+    await page.waitForTimeout(700);
+    const c4 = await page.evaluate(() => window.meshwikiViewer.camera());
+    assert.ok(Math.hypot(...c4.eye.map((v, k) => v - c0.eye[k])) < dist(c0) * 1e-3, 'Home did not reset the view');
+
+    // Light and background: the reader's choice, drawn, and kept for the next visit.
+    s = await waitViewer(page, settled);
+    const plain = await capture(page, 'look-plain');
+    await page.locator('.viewer-settings > summary').click();
+    await page.getByRole('radio', { name: 'White' }).check();
+    await page.getByRole('radio', { name: /Raking light/ }).check();
+    await shot(page, 'view-menu');
+    await page.keyboard.press('Escape');
+    const lit = await capture(page, 'look-raking-white');
+    assert.ok(lit.background[0] > 240 && lit.background[1] > 240 && lit.background[2] > 240, `background not white: ${lit.background}`);
+    assert.ok(Math.abs(lit.meanSurface - plain.meanSurface) > 3, `the light did not change the surface: ${plain.meanSurface} → ${lit.meanSurface}`);
+    await page.reload();
+    await waitViewer(page, settled);
+    assert.equal(await page.evaluate(() => document.getElementById('viewer').dataset.background), 'white');
+    await page.evaluate(() => localStorage.removeItem('meshwiki-look'));
     await page.close();
   });
 

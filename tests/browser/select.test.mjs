@@ -266,14 +266,14 @@ describe('the selection tools on the real server', () => {
     assert.match(await page.locator('.viewer-panel').textContent(), /Carved note/);
 
     // Edit region: the part open in the panel grows by a lasso; confirming updates it. The
-    // panel narrowed the view: find the model again.
+    // panel's drawer covers the view's right side: draw where it leaves the model in sight.
     await capture(page, 'panel');
     c = await surfaceCentre(page, 'panel');
     await tools.locator('button[data-action=edit-region]').click();
     s = await waitSelection(page, (s) => s.editing === partId);
     assert.equal(s.mode, 'add');
     assert.equal(s.tool, 'lasso');
-    await draw(circle(c.x, c.y, r * 0.25, 20));
+    await draw(circle(c.x, c.y, Math.min(r * 0.25, (c.right - c.x) * 0.8), 20));
     s = await waitSelection(page, (s) => s.drafts.length === 1 || s.error !== '');
     assert.equal(s.error, '', 'the edit failed');
     assert.equal(s.drafts[0].part_id, partId);
@@ -320,6 +320,12 @@ describe('the selection tools on the real server', () => {
     assert.equal(s.error, '', 'the point failed');
     assert.equal(s.drafts[0].tool, 'point');
     assert.equal(s.drafts[0].vertex_count, 1);
+    // A marker shows the picked point (one tinted vertex is too small to see), where clicked.
+    const marker = page.locator('.point-marker[data-point=draft]');
+    await marker.waitFor({ state: 'visible', timeout: 5_000 });
+    const m = await marker.boundingBox();
+    assert.ok(Math.hypot(m.x + m.width / 2 - p.x, m.y + m.height / 2 - p.y) < 12, `the marker is not at the click: ${JSON.stringify({ m, p })}`);
+    assert.match(await tools.textContent(), /1 vertex\b/);
     await tools.locator('button[data-action=confirm]').click();
     await poll(page, () => document.querySelector('.select-assign:not([hidden])')?.dataset.partId, (v) => v && Number(v) !== partId, 20_000);
     const pointId = Number(await card.getAttribute('data-part-id'));

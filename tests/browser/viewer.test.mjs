@@ -11,7 +11,7 @@ import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
 import { sampleMesh } from './support/env.mjs';
-import { ADMIN, importScan, seedPart, startServer } from './support/server.mjs';
+import { ADMIN, homeDirection, importScan, seedPart, startServer } from './support/server.mjs';
 import { launch, login, poll, waitViewer } from './support/browser.mjs';
 import { capture, compareWithImage, holes } from './support/pixels.mjs';
 import { leafVertices, regionAt } from './support/regions.mjs';
@@ -30,8 +30,9 @@ before(async () => {
   server = await startServer();
   model = await importScan(server.api, mesh.path, 'Igea test scan');
   const leaves = await leafVertices(join(server.dataDir, model.lod_path));
-  // A region facing the home view (+Z): the front-most point and its neighbourhood.
-  const region = regionAt(leaves, [0, 0, 1]);
+  // A region facing the home view (the side the thumbnail shows): the front-most point and its
+  // neighbourhood.
+  const region = regionAt(leaves, await homeDirection(server.api, model.id));
   seeded = await seedPart(server.api, model.id, {
     title: 'Weathered nose',
     caption: 'Erosion of the marble',
@@ -135,6 +136,8 @@ test('a search result lands on the part: framed, highlighted, its information op
   await page.goto(`${server.base}/search?q=zephyrine`);
   const link = page.locator(`.hit-parts a.part-link[data-part-id="${seeded.part.id}"]`);
   assert.equal(await link.count(), 1, 'search hit has no link to the part');
+  // The region is named by its information, as its callout is, not by a number.
+  assert.match(await link.textContent(), /^Weathered nose on /);
   // Start far from the part: the landing must frame it.
   await Promise.all([page.waitForNavigation(), link.click()]);
   const s = await waitViewer(page, (s) => settled(s) && s.selected === seeded.part.id);

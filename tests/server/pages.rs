@@ -79,7 +79,37 @@ fn pages_work_without_javascript() {
         ],
     );
     assert_eq!(r.status, 303, "{}", r.text());
-    assert!(admin.get("/admin/users").text().contains("edna"));
+    // The page after the change says what was done.
+    let after = admin.get(r.header("location").unwrap()).text();
+    assert!(
+        after.contains("User edna was created, role editor."),
+        "{after}"
+    );
+    let edna = after
+        .split("action=\"/admin/users/")
+        .filter_map(|s| s.split('"').next())
+        .last()
+        .unwrap()
+        .to_string();
+    let r = admin.post_form(
+        &format!("/admin/users/{edna}"),
+        &[("csrf_token", &csrf), ("role", "viewer")],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    let after = admin.get(r.header("location").unwrap()).text();
+    assert!(
+        after.contains("User edna was saved: role viewer."),
+        "{after}"
+    );
+    let r = admin.post_form(
+        &format!("/admin/users/{edna}"),
+        &[("csrf_token", &csrf), ("role", "editor")],
+    );
+    assert_eq!(r.status, 303);
+    assert!(
+        !admin.get("/admin/users").text().contains("was saved"),
+        "a notice without a change"
+    );
     // Demoting yourself is refused.
     let r = admin.post_form(
         "/admin/users/1",
@@ -124,8 +154,19 @@ fn pages_work_without_javascript() {
     assert!(admin.get(&model_url).text().contains("Temple gate (east)"));
 
     let editor = form_login(&server, "edna", "edna-password");
-    // Editors cannot open admin pages.
-    assert_eq!(editor.get("/admin/users").status, 403);
+    // Editors cannot open admin pages; the refusal keeps the site's navigation and says who
+    // is logged in.
+    let r = editor.get("/admin/users");
+    assert_eq!(r.status, 403);
+    let html = r.text();
+    assert!(
+        html.contains("<nav aria-label=\"Main\">") && html.contains("edna"),
+        "{html}"
+    );
+    assert!(
+        html.contains("403 Forbidden") && !html.contains("href=\"/admin/jobs\""),
+        "{html}"
+    );
 
     // New content with preview, then save.
     let page = editor.get("/contents/new");
@@ -199,6 +240,25 @@ fn pages_work_without_javascript() {
     assert_eq!(r.status, 409);
     let merge = r.text();
     assert!(merge.contains("Edit conflict"));
+    // A blank title is refused; the breadcrumb keeps the saved title.
+    let r = editor.post_form(
+        &format!("/contents/{id}/edit"),
+        &[
+            ("csrf_token", &csrf),
+            ("base_revision", "2"),
+            ("title", "   "),
+            ("caption", "cap"),
+            ("body", "x"),
+            ("action", "save"),
+        ],
+    );
+    assert_eq!(r.status, 400);
+    assert!(
+        r.text()
+            .contains(&format!("<a href=\"/contents/{id}\">Gate beam</a> ›")),
+        "{}",
+        r.text()
+    );
     assert!(merge.contains("carved dragons"), "theirs shown");
     assert!(merge.contains("painted phoenixes"), "yours shown");
     assert!(
@@ -365,7 +425,18 @@ fn pages_work_without_javascript() {
     // Unknown pages: HTML 404; static CSS served.
     let r = editor.get("/contents/99999");
     assert_eq!(r.status, 404);
-    assert!(r.text().contains("<html"));
+    let html = r.text();
+    assert!(
+        html.contains("<html") && html.contains("<nav aria-label=\"Main\">"),
+        "{html}"
+    );
+    let r = editor.get("/no/such/page");
+    assert_eq!(r.status, 404);
+    assert!(r.text().contains("<nav aria-label=\"Main\">"));
+    // Without a session: the page, without anyone's navigation.
+    let r = server.client().get("/no/such/page");
+    assert_eq!(r.status, 404);
+    assert!(r.text().contains("404 Not Found") && !r.text().contains("<nav aria-label=\"Main\">"));
     let css = editor.get("/static/style.css");
     assert_eq!(css.status, 200);
     assert!(css.header("content-type").unwrap().starts_with("text/css"));
@@ -374,4 +445,48 @@ fn pages_work_without_javascript() {
     let r = editor.post_form("/logout", &[("csrf_token", &csrf)]);
     assert_eq!(r.status, 303);
     assert_eq!(editor.get("/contents").status, 303);
+}
+
+/// A picture dropped onto a region becomes a content whose body shows the picture and whose
+/// thumbnail is the same picture: the page and the API say to show it once, not twice; a
+/// thumbnail the body does not show stays beside it.
+#[test]
+fn a_picture_in_the_body_is_not_shown_again_as_thumbnail() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let mut ids = Vec::new();
+    for name in ["dropped.png", "other.png"] {
+        let r = admin.upload(
+            "/api/v1/attachments",
+            &[],
+            name,
+            "image/png",
+            name.as_bytes(),
+            true,
+        );
+        assert_eq!(r.status, 201, "{}", r.text());
+        ids.push(r.json()["id"].as_i64().unwrap());
+    }
+    let (pic, other) = (ids[0], ids[1]);
+    let dropped = admin.post(
+        "/api/v1/contents",
+        &serde_json::json!({"title": "Dropped", "body": format!("![dropped.png](/api/v1/attachments/{pic}/download)\n"),
+            "thumbnail_attachment_id": pic}),
+    );
+    assert_eq!(dropped.status, 201, "{}", dropped.text());
+    let written = admin.post(
+        "/api/v1/contents",
+        &serde_json::json!({"title": "Written", "body": "Words only.", "thumbnail_attachment_id": other}),
+    );
+    for (r, shown, src) in [(dropped, false, pic), (written, true, other)] {
+        let id = r.json()["id"].as_i64().unwrap();
+        let api = admin.get(&format!("/api/v1/contents/{id}")).json();
+        assert_eq!(api["show_thumbnail"], shown, "{api}");
+        let page = admin.get(&format!("/contents/{id}")).text();
+        let n = page
+            .matches(&format!("src=\"/api/v1/attachments/{src}/download\""))
+            .count();
+        assert_eq!(n, 1, "content {id} shows its picture once: {page}");
+    }
 }

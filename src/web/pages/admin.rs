@@ -29,6 +29,32 @@ struct UsersPage {
     users: Vec<User>,
     roles: Vec<&'static str>,
     error: String,
+    /// What the last change did, said after its redirect.
+    notice: String,
+}
+
+/// The users page's query after a change: what was done to which user.
+#[derive(Debug, Default, Deserialize)]
+struct Done {
+    /// `created` or `updated`.
+    done: Option<String>,
+    /// The user.
+    user: Option<i64>,
+}
+
+impl Done {
+    /// The notice about it, from the user as now stored.
+    fn notice(&self, users: &[User]) -> String {
+        let Some(u) = self.user.and_then(|id| users.iter().find(|u| u.id == id)) else {
+            return String::new();
+        };
+        let state = if u.disabled { ", disabled" } else { "" };
+        match self.done.as_deref() {
+            Some("created") => format!("User {} was created, role {}.", u.username, u.role),
+            Some("updated") => format!("User {} was saved: role {}{state}.", u.username, u.role),
+            _ => String::new(),
+        }
+    }
 }
 
 async fn page(
@@ -36,12 +62,14 @@ async fn page(
     auth: &PageAuth,
     status: StatusCode,
     error: String,
+    done: &Done,
 ) -> Result<HttpResponse, PageError> {
     let users = users::list(&state.db, Page::new(Some(1000), None)).await?;
     render_status(
         status,
         &UsersPage {
             layout: Layout::new(auth, "Users"),
+            notice: done.notice(&users),
             users,
             roles: Role::ALL.iter().map(|r| r.as_str()).collect(),
             error,
@@ -49,9 +77,13 @@ async fn page(
     )
 }
 
-async fn list(state: web::Data<AppState>, auth: PageAuth) -> Result<HttpResponse, PageError> {
+async fn list(
+    state: web::Data<AppState>,
+    auth: PageAuth,
+    done: web::Query<Done>,
+) -> Result<HttpResponse, PageError> {
     auth.require(Role::Admin)?;
-    page(&state, &auth, StatusCode::OK, String::new()).await
+    page(&state, &auth, StatusCode::OK, String::new(), &done).await
 }
 
 #[derive(Debug, Deserialize)]
@@ -84,9 +116,19 @@ async fn create(
     )
     .await
     {
-        Ok(_) => Ok(redirect("/admin/users")),
+        Ok(u) => Ok(redirect(&format!(
+            "/admin/users?done=created&user={}",
+            u.id
+        ))),
         Err(e @ (crate::store::StoreError::Invalid(_) | crate::store::StoreError::Conflict(_))) => {
-            page(&state, &post.auth, StatusCode::BAD_REQUEST, e.to_string()).await
+            page(
+                &state,
+                &post.auth,
+                StatusCode::BAD_REQUEST,
+                e.to_string(),
+                &Done::default(),
+            )
+            .await
         }
         Err(e) => Err(e.into()),
     }
@@ -122,12 +164,26 @@ async fn update(
         password: (!f.password.is_empty()).then(|| f.password.clone()),
     };
     if let Err(e) = crate::web::users::guard_self(post.auth.id(), *id, &patch) {
-        return page(&state, &post.auth, StatusCode::CONFLICT, e.to_string()).await;
+        return page(
+            &state,
+            &post.auth,
+            StatusCode::CONFLICT,
+            e.to_string(),
+            &Done::default(),
+        )
+        .await;
     }
     match users::update(&state.db, *id, &patch, Some(post.auth.id())).await {
-        Ok(_) => Ok(redirect("/admin/users")),
+        Ok(_) => Ok(redirect(&format!("/admin/users?done=updated&user={}", *id))),
         Err(e @ crate::store::StoreError::Invalid(_)) => {
-            page(&state, &post.auth, StatusCode::BAD_REQUEST, e.to_string()).await
+            page(
+                &state,
+                &post.auth,
+                StatusCode::BAD_REQUEST,
+                e.to_string(),
+                &Done::default(),
+            )
+            .await
         }
         Err(e) => Err(e.into()),
     }

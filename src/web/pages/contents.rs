@@ -91,6 +91,8 @@ struct ContentPage {
     layout: Layout,
     content: Content,
     html: String,
+    /// The thumbnail is shown beside the body (not when the body shows it).
+    show_thumbnail: bool,
     author: String,
     attachments: Vec<Attachment>,
     parts: Vec<AssignedPart>,
@@ -132,10 +134,15 @@ async fn show(
             Layout::anonymous(content.title.clone())
         }
     };
+    let html = markdown::render(&content.body);
     render(&ContentPage {
         can_edit: layout.can_edit(),
         layout,
-        html: markdown::render(&content.body),
+        show_thumbnail: crate::web::contents::show_thumbnail(
+            content.thumbnail_attachment_id,
+            &html,
+        ),
+        html,
         author: current.author,
         content,
         attachments,
@@ -152,6 +159,8 @@ struct EditPage {
     action: String,
     content_id: i64,
     base_revision: i64,
+    /// The title as saved (the breadcrumb's), whatever the form holds.
+    saved_title: String,
     title: String,
     caption: String,
     body: String,
@@ -169,6 +178,7 @@ impl EditPage {
             action: "/contents/new".into(),
             content_id: 0,
             base_revision: 0,
+            saved_title: String::new(),
             title: String::new(),
             caption: String::new(),
             body: String::new(),
@@ -260,6 +270,7 @@ async fn edit_page(
         action: format!("/contents/{}/edit", content.id),
         content_id: content.id,
         base_revision: content.current_revision,
+        saved_title: content.title.clone(),
         title: content.title,
         caption: content.caption,
         body: content.body,
@@ -382,6 +393,7 @@ async fn save(
                 content_id: content.id,
                 base_revision: base,
                 preview_html: markdown::render(&edit.body),
+                saved_title: content.title.clone(),
                 title: edit.title,
                 caption: edit.caption,
                 body: edit.body,

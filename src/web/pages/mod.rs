@@ -72,67 +72,15 @@ use actix_web::{HttpResponse, web};
 use askama::Template;
 use serde::Deserialize;
 
+use actix_web::body::{BoxBody, MessageBody};
+use actix_web::dev::{ServiceRequest, ServiceResponse};
+use actix_web::middleware::Next;
+
 use super::PageError;
-use super::auth::{CsrfForm, PageAuth};
-use crate::store::users::Role;
+use super::auth::CsrfForm;
+use super::error::{ErrorPage, ErrorPageInfo};
 
-/// The logged-in user as the layout shows it.
-#[derive(Debug, Clone)]
-pub struct UserInfo {
-    /// Id.
-    pub id: i64,
-    /// User name.
-    pub username: String,
-    /// Role name.
-    pub role: String,
-    /// Admin?
-    pub is_admin: bool,
-    /// Editor or admin?
-    pub can_edit: bool,
-}
-
-/// What the base layout needs.
-#[derive(Debug, Clone)]
-pub struct Layout {
-    /// Page title.
-    pub title: String,
-    /// Logged-in user.
-    pub user: Option<UserInfo>,
-    /// CSRF token for forms.
-    pub csrf: String,
-}
-
-impl Layout {
-    /// Layout for a logged-in page.
-    pub fn new(auth: &PageAuth, title: impl Into<String>) -> Layout {
-        let u = auth.user();
-        Layout {
-            title: title.into(),
-            user: Some(UserInfo {
-                id: u.id,
-                username: u.username.clone(),
-                role: u.role.to_string(),
-                is_admin: u.role >= Role::Admin,
-                can_edit: u.role >= Role::Editor,
-            }),
-            csrf: auth.csrf().to_string(),
-        }
-    }
-
-    /// Layout for a page without a session.
-    pub fn anonymous(title: impl Into<String>) -> Layout {
-        Layout {
-            title: title.into(),
-            user: None,
-            csrf: String::new(),
-        }
-    }
-
-    /// Whether the user may edit.
-    pub fn can_edit(&self) -> bool {
-        self.user.as_ref().is_some_and(|u| u.can_edit)
-    }
-}
+pub use super::layout::{Layout, UserInfo};
 
 /// A form with only the CSRF field.
 #[derive(Debug, Deserialize)]
@@ -170,6 +118,37 @@ pub fn redirect(to: &str) -> HttpResponse {
 /// Normalises form text: CRLF → LF.
 pub fn lf(s: &str) -> String {
     s.replace("\r\n", "\n")
+}
+
+/// Gives HTML error pages (403, 404, 409…, rendered by [`PageError`] without knowing who asks)
+/// the navigation of the visitor's session, so an error never strands anyone outside the site.
+pub async fn error_pages(
+    req: ServiceRequest,
+    next: Next<impl MessageBody + 'static>,
+) -> Result<ServiceResponse<BoxBody>, actix_web::Error> {
+    let res = next.call(req).await?;
+    let Some(info) = res.response().extensions().get::<ErrorPageInfo>().cloned() else {
+        return Ok(res.map_into_boxed_body());
+    };
+    let session = super::auth::current_session(res.request())
+        .await
+        .ok()
+        .flatten();
+    let Some(session) = session else {
+        return Ok(res.map_into_boxed_body());
+    };
+    let status = res.status();
+    let reason = status.canonical_reason().unwrap_or("Error");
+    let page = ErrorPage {
+        layout: Layout::of_session(&session, format!("{} {reason}", status.as_u16())),
+        status: status.as_u16(),
+        reason,
+        message: info.message,
+    };
+    let Ok(html) = page.render() else {
+        return Ok(res.map_into_boxed_body());
+    };
+    Ok(res.map_body(|_, _| BoxBody::new(html)))
 }
 
 async fn home() -> HttpResponse {

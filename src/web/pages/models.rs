@@ -10,6 +10,9 @@ use serde::Deserialize;
 
 use super::filters;
 use super::{Layout, redirect, render};
+use meshwiki_engine::camera::Camera;
+
+use crate::app::models::Purpose;
 use crate::search::SearchHit;
 use crate::store::assignments::{self, AssignedContent};
 use crate::store::models::{self, Model, NewModel};
@@ -197,11 +200,20 @@ fn viewer_json(
     parts: &[PartView],
     can_edit: bool,
     config: &crate::app::client::ClientConfig,
+    home: Option<&Camera>,
 ) -> String {
     let json = serde_json::json!({
         "model": model,
         "parts": parts,
         "can_edit": can_edit,
+        // The first view: the side the model's thumbnail shows (the viewer frames it to its own
+        // canvas).
+        "home": home.map(|c| serde_json::json!({
+            "eye": c.eye.to_array(),
+            "target": c.target.to_array(),
+            "up": c.up.to_array(),
+            "fovy": c.fovy_deg,
+        })),
         // The server's limits, as GET /api/v1/config gives them (selection masks must fit
         // its largest view).
         "config": config,
@@ -386,6 +398,16 @@ async fn show(
         None
     };
     let ready = model.status == models::ModelStatus::Ready;
+    let home = if ready {
+        state
+            .models
+            .open(&state.db, model.id, Purpose::Serve)
+            .await
+            .ok()
+            .map(|open| crate::jobs::thumbnail::camera(&open.lod))
+    } else {
+        None
+    };
     let status = status_words(
         &model,
         build_job
@@ -416,7 +438,13 @@ async fn show(
         viewer_enabled: ready && crate::web::vendor::available(),
         viewer_message,
         import_map: crate::web::vendor::IMPORT_MAP,
-        viewer_data: viewer_json(&model, &views, can_edit, &state.client_config()),
+        viewer_data: viewer_json(
+            &model,
+            &views,
+            can_edit,
+            &state.client_config(),
+            home.as_ref(),
+        ),
         layout,
         description_html: markdown::render(&model.description),
         bbox,

@@ -144,7 +144,8 @@ export class InfoPanel {
       return a;
     }
     if (c.caption) a.append(el('p', 'caption', c.caption));
-    if (c.thumbnail_attachment_id) {
+    // The server says whether the body shows the thumbnail already (a dropped picture is both).
+    if (c.thumbnail_attachment_id && c.show_thumbnail !== false) {
       const img = el('img', 'thumb');
       img.alt = '';
       img.src = `/api/v1/attachments/${c.thumbnail_attachment_id}/download`;

@@ -79,7 +79,8 @@ export class SelectController {
       onStroke: (s) => this.stroke(s),
       onClick: (p) => this.click(p),
     });
-    this.assign = new AssignStep(root, stage, this.api, {
+    // The step opens in the view's drawer (the viewer adopts `assign.root`).
+    this.assign = new AssignStep(stage, stage, this.api, {
       assigned: (partId) => host.contentsChanged(partId),
       closed: (partId) => {
         this.render();
@@ -111,6 +112,13 @@ export class SelectController {
   /** The toolbar group's element. */
   get element() {
     return this.tools.root;
+  }
+
+  /** The surface point the point tool picked (its draft's anchor), or null. */
+  pickedPoint() {
+    const top = this.session.top;
+    const d = top ? top.draft : null;
+    return d && d.kind === 'point' && Array.isArray(d.center) ? d.center : null;
   }
 
   /** Whether a draft's highlight replaces the selected part's. */

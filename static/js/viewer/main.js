@@ -1,8 +1,9 @@
 // The 3D viewer of the model page (progressive enhancement of `<div id="viewer">`): streams
 // the model's patches view-dependently, draws them with three.js, shows the parts as callouts
-// and exact highlights, opens their information (Escape closes it), lands on a linked part (the
-// search that found it marked in its information), follows live edits; editors also get the
-// region-selection tools (../select/).
+// and exact highlights, opens their information in a drawer over the view (Escape closes it,
+// its edge resizes it), lands on a linked part (the search that found it marked in its
+// information), follows live edits; the reader picks the light and the background, and moves
+// with mouse, touch or keyboard; editors also get the region-selection tools (../select/).
 
 import * as THREE from 'three';
 import { parseBinary, fromJson } from '../lod/table.js';
@@ -15,7 +16,8 @@ import { listen } from '../parts/live.js';
 import { SceneView } from './scene.js';
 import { Navigation, framing } from './navigation.js';
 import { pick, firstHitDistance } from './picking.js';
-import { makeToolbar } from './toolbar.js';
+import { BACKGROUNDS, LIGHTING, makeToolbar } from './toolbar.js';
+import { Drawers } from './drawer.js';
 import { clearQuery, linkedPart, linkedQuery, parseCamera, writePart } from './url.js';
 import { SelectController } from '../select/controller.js';
 
@@ -28,6 +30,21 @@ const VISIBILITY_INTERVAL_MS = 150;
 const VISIBILITY_MIN_RADIUS_PX = 4;
 const CLICK_SLOP_PX = 5;
 const NEAR_PX = 12;
+/** Where the reader's light and background are kept between visits. */
+const LOOK_KEY = 'meshwiki-look';
+
+function storedLook() {
+  let look = {};
+  try {
+    look = JSON.parse(window.localStorage.getItem(LOOK_KEY) || '{}') || {};
+  } catch {
+    look = {};
+  }
+  return {
+    lighting: look.lighting in LIGHTING ? look.lighting : 'headlight',
+    background: look.background in BACKGROUNDS ? look.background : 'dark',
+  };
+}
 
 async function loadTable(modelId) {
   const base = `/api/v1/models/${modelId}/lod`;
@@ -65,11 +82,25 @@ class Viewer {
     this.view = new SceneView(this.stage, table, { onChange: () => this.requestFrame() });
     this.overlay = document.createElement('div');
     this.overlay.className = 'viewer-overlay';
+    // Callouts wait for the model: labels over an empty view point at nothing.
+    this.overlay.hidden = true;
     this.stage.appendChild(this.overlay);
+    this.loading = document.createElement('div');
+    this.loading.className = 'viewer-loading';
+    this.loading.setAttribute('role', 'status');
+    this.loading.textContent = 'Loading the model…';
+    this.stage.appendChild(this.loading);
+    this.look = storedLook();
+    this.applyLook();
     this.store = new PartStore(this.modelId, data.parts, table.radius, table.inputVertices);
     this.callouts = new Callouts(this.overlay, { onHover: (id) => this.setHover(id), onClick: (id) => this.select(id, true) });
     this.preview = new Preview(this.stage);
-    this.panel = new InfoPanel(root, { canEdit: !!data.can_edit, onClose: () => this.select(null, false) });
+    this.panel = new InfoPanel(this.stage, { canEdit: !!data.can_edit, onClose: () => this.select(null, false) });
+    this.drawers = new Drawers(root, this.stage, () => {
+      this.layoutDirty = true;
+      this.requestFrame();
+    });
+    this.drawers.adopt(this.panel.root);
     this.foveaLayer = document.createElement('div');
     this.foveaLayer.className = 'fovea-layer';
     this.overlay.appendChild(this.foveaLayer);
@@ -87,11 +118,16 @@ class Viewer {
       },
       onChange: () => this.requestFrame(),
     });
-    this.nav = new Navigation(this.view, table, () => {
-      this.layoutDirty = true;
-      this.requestFrame();
-    });
-    this.toolbar = makeToolbar(root, this.streamer.settings, {
+    this.nav = new Navigation(
+      this.view,
+      table,
+      () => {
+        this.layoutDirty = true;
+        this.requestFrame();
+      },
+      data.home || null,
+    );
+    this.toolbar = makeToolbar(root, this.streamer.settings, this.look, {
       reset: () => this.nav.reset(),
       toggleFoveaMode: (on) => {
         this.foveaMode = on;
@@ -102,12 +138,28 @@ class Viewer {
         this.streamer.setSettings(changes);
         this.requestFrame();
       },
+      setLook: (changes) => {
+        this.look = { ...this.look, ...changes };
+        try {
+          window.localStorage.setItem(LOOK_KEY, JSON.stringify(this.look));
+        } catch {
+          /* private browsing: the choice lasts for the page */
+        }
+        this.applyLook();
+        this.requestFrame();
+      },
     });
     // The server's limits (GET /api/v1/config, embedded in the page).
     const limits = data.config?.view_limits;
     this.viewLimits = limits ? { maxSide: limits.max_side, maxPixels: limits.max_pixels } : null;
     this.selection = data.can_edit ? this.makeSelection() : null;
-    if (this.selection) this.toolbar.addGroup(this.selection.element);
+    if (this.selection) {
+      this.toolbar.addGroup(this.selection.element);
+      this.drawers.adopt(this.selection.assign.root);
+    }
+    this.markerLayer = document.createElement('div');
+    this.markerLayer.className = 'fovea-layer';
+    this.overlay.appendChild(this.markerLayer);
     this.store.onChange(() => this.partsChanged());
     this.bindPointer();
     this.bindKeys();
@@ -119,6 +171,14 @@ class Viewer {
     this.land();
     this.store.loadBitmaps();
     this.requestFrame();
+  }
+
+  /** Applies the reader's light and background. */
+  applyLook() {
+    const l = LIGHTING[this.look.lighting];
+    this.view.setLighting(l.mode, l.ambient);
+    this.view.setBackground(BACKGROUNDS[this.look.background].color);
+    this.root.dataset.background = this.look.background;
   }
 
   /** The region-selection tools (editors), drawing on this view. */
@@ -220,7 +280,12 @@ class Viewer {
     const channel = this.hovered !== null ? 1 : this.selected !== null || drafting ? 2 : 0;
     this.view.render(channel);
     this.frames++;
-    if (result.draw.length > 0 && this.firstImageAt === null) this.firstImageAt = performance.now() - this.started;
+    if (result.draw.length > 0 && this.firstImageAt === null) {
+      this.firstImageAt = performance.now() - this.started;
+      this.loading.hidden = true;
+      this.overlay.hidden = false;
+      this.layoutDirty = true;
+    }
     const now = performance.now();
     if (this.layoutDirty) {
       if (now - this.lastLayout >= CALLOUT_INTERVAL_MS) {
@@ -233,6 +298,7 @@ class Viewer {
       }
     }
     this.drawFoveae();
+    this.drawMarkers();
     this.visibility(now);
     this.status();
   }
@@ -272,9 +338,11 @@ class Viewer {
     const pixelScale = this.view.height / (2 * Math.tan((this.view.camera.fov * Math.PI) / 360));
     const eye = this.view.camera.position;
     const candidates = [];
+    // Labels stay in the part of the view the drawer leaves uncovered.
+    const width = Math.max(1, this.view.width - this.drawers.covered());
     for (const e of this.store.parts.values()) {
       const s = this.project(e.part.center);
-      if (!s || s.x < 0 || s.y < 0 || s.x > this.view.width || s.y > this.view.height) continue;
+      if (!s || s.x < 0 || s.y < 0 || s.x > width || s.y > this.view.height) continue;
       const extent = this.store.extent(e.id);
       candidates.push({ e, s, extent, radiusPx: (extent * pixelScale) / s.depth });
     }
@@ -296,7 +364,7 @@ class Viewer {
         priority: (c.e.id === this.selected ? 1e9 : 0) + (c.e.id === this.hovered ? 1e8 : 0) + c.radiusPx,
       });
     }
-    this.callouts.layout(items, this.view.width, this.view.height, { selected: this.selected, hovered: this.hovered });
+    this.callouts.layout(items, width, this.view.height, { selected: this.selected, hovered: this.hovered });
   }
 
   drawFoveae() {
@@ -311,13 +379,37 @@ class Viewer {
     }
   }
 
+  /** The status in plain words; the streaming figures go under View › Advanced. */
   status() {
     const r = this.result;
     const s = this.streamer.stats;
+    const refining = r.pending > 0 || r.inFlight > 0;
+    const n = this.foveae.length;
+    let words;
+    if (this.firstImageAt === null) words = 'Loading the model…';
+    else if (refining) words = 'Sharpening the view…';
+    else words = 'Sharp: every detail this view can show';
+    if (n) words += ` · ${n} focus point${n > 1 ? 's' : ''}`;
+    this.toolbar.setStatus(words);
+    this.toolbar.setFoveaCount(n);
     const mb = (s.bytes / 1e6).toFixed(1);
     const rate = (this.streamer.bandwidth() / 1e6).toFixed(1);
-    const quality = r.pending > 0 || r.inFlight > 0 ? 'refining' : `≤ ${this.streamer.settings.pixelError} px`;
-    this.toolbar.setStatus(`${r.draw.length} patches · ${r.triangles.toLocaleString()} triangles · ${mb} MB loaded at ${rate} MB/s · ${quality}` + (this.foveae.length ? ` · ${this.foveae.length} fovea${this.foveae.length > 1 ? 'e' : ''}` : ''));
+    const quality = refining ? 'refining' : `≤ ${this.streamer.settings.pixelError} px`;
+    this.toolbar.setDetails(`${r.draw.length} patches · ${r.triangles.toLocaleString()} triangles · ${mb} MB loaded at ${rate} MB/s · ${quality}`);
+  }
+
+  /** The marker of a picked point (the point tool's draft), which a tint of one vertex cannot show. */
+  drawMarkers() {
+    this.markerLayer.replaceChildren();
+    const p = this.selection ? this.selection.pickedPoint() : null;
+    if (!p) return;
+    const s = this.project(p);
+    if (!s) return;
+    const dot = document.createElement('div');
+    dot.className = 'point-marker';
+    dot.dataset.point = 'draft';
+    dot.style.transform = `translate(${Math.round(s.x - 8)}px, ${Math.round(s.y - 8)}px)`;
+    this.markerLayer.appendChild(dot);
   }
 
   // --- highlights -------------------------------------------------------------------------

@@ -1,6 +1,8 @@
 // Navigation: orbit, pan and zoom with mouse, wheel and touch (three's OrbitControls: one
-// finger orbits, two pan and pinch-zoom), double-click to centre on the surface point, reset
-// to the home view, animated camera moves, and the camera kept in the URL.
+// finger orbits, two pan and pinch-zoom) and with the keyboard on the focused view (arrows
+// turn, Shift+arrows move, + and − zoom, Home resets), double-click to centre on the surface
+// point, reset to the home view (the side the model's thumbnail shows), animated camera
+// moves, and the camera kept in the URL.
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -8,6 +10,35 @@ import { pick } from './picking.js';
 import { writeCamera } from './url.js';
 
 const FOVY = 40;
+/** One arrow key turns the view by this many degrees. */
+const KEY_TURN_DEG = 7.5;
+/** One Shift+arrow moves the view by this fraction of the target's distance. */
+const KEY_PAN = 0.08;
+/** One + or − brings the eye this much closer or farther. */
+const KEY_ZOOM = 0.8;
+
+/** The home view: the model's bounding sphere framed from `home`'s direction (the server's
+ * choice, the side its thumbnail shows), else from +z. */
+export function homeView(model, home) {
+  if (!home) return framing(model.center, model.radius);
+  const dir = home.eye.map((v, k) => v - home.target[k]);
+  if (!(Math.hypot(...dir) > 0)) return framing(model.center, model.radius);
+  return framing(model.center, model.radius, dir, home.up);
+}
+
+/** `v` rotated by `angle` (radians) about the unit axis `k` (Rodrigues). */
+function rotate(v, k, angle) {
+  const c = Math.cos(angle);
+  const s = Math.sin(angle);
+  const dot = v[0] * k[0] + v[1] * k[1] + v[2] * k[2];
+  const cross = [k[1] * v[2] - k[2] * v[1], k[2] * v[0] - k[0] * v[2], k[0] * v[1] - k[1] * v[0]];
+  return v.map((x, i) => x * c + cross[i] * s + k[i] * dot * (1 - c));
+}
+
+function unit(v) {
+  const l = Math.hypot(...v) || 1;
+  return v.map((x) => x / l);
+}
 
 /** A camera {eye, target, up, fovy} that frames a sphere from direction `dir`. */
 export function framing(center, radius, dir = [0, 0, 1], up = [0, 1, 0], fovy = FOVY) {
@@ -26,17 +57,64 @@ export class Navigation {
    * @param {import('./scene.js').SceneView} view
    * @param {{center: number[], radius: number}} model bounds of the model
    * @param {() => void} onChange called when the camera moved
+   * @param {{eye: number[], target: number[], up: number[]}|null} [home] the server's first view
    */
-  constructor(view, model, onChange) {
+  constructor(view, model, onChange, home = null) {
     this.view = view;
     this.model = model;
     this.onChange = onChange;
-    this.home = framing(model.center, model.radius);
+    this.home = homeView(model, home);
     this.animation = null;
     this.urlTimer = null;
     this.makeControls([0, 1, 0]);
     this.onDoubleClick = (e) => this.centreOn(e.clientX, e.clientY);
     view.canvas.addEventListener('dblclick', this.onDoubleClick);
+    this.onKey = (e) => this.key(e);
+    view.canvas.addEventListener('keydown', this.onKey);
+  }
+
+  /** Keyboard control of the focused view; true when the key was used. */
+  key(e) {
+    if (e.defaultPrevented || e.ctrlKey || e.metaKey || e.altKey || !this.controls.enabled) return false;
+    const c = this.get();
+    const offset = c.eye.map((v, k) => v - c.target[k]);
+    const dist = Math.hypot(...offset);
+    const forward = unit(offset.map((v) => -v));
+    const right = unit([forward[1] * c.up[2] - forward[2] * c.up[1], forward[2] * c.up[0] - forward[0] * c.up[2], forward[0] * c.up[1] - forward[1] * c.up[0]]);
+    const upScreen = unit([right[1] * forward[2] - right[2] * forward[1], right[2] * forward[0] - right[0] * forward[2], right[0] * forward[1] - right[1] * forward[0]]);
+    const turn = (KEY_TURN_DEG * Math.PI) / 180;
+    let next = null;
+    const arrows = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, 1], ArrowDown: [0, -1] };
+    if (e.key in arrows) {
+      const [x, y] = arrows[e.key];
+      if (e.shiftKey) {
+        const d = right.map((v, k) => (v * x + upScreen[k] * y) * dist * KEY_PAN);
+        next = { ...c, eye: c.eye.map((v, k) => v + d[k]), target: c.target.map((v, k) => v + d[k]) };
+      } else if (x !== 0) {
+        // Around the up axis, as dragging sideways turns the model.
+        const o = rotate(offset, unit(c.up), -x * turn);
+        next = { ...c, eye: c.target.map((v, k) => v + o[k]) };
+      } else {
+        // Over the top, not past it: the view stays upright.
+        const o = rotate(offset, right, y * turn);
+        const upness = o.reduce((a, v, k) => a + v * c.up[k], 0) / dist;
+        if (Math.abs(upness) < 0.995) next = { ...c, eye: c.target.map((v, k) => v + o[k]) };
+        else next = c;
+      }
+    } else if (e.key === '+' || e.key === '=' || e.key === '-' || e.key === '_') {
+      const f = e.key === '+' || e.key === '=' ? KEY_ZOOM : 1 / KEY_ZOOM;
+      const d = Math.min(this.controls.maxDistance, Math.max(this.controls.minDistance, dist * f));
+      next = { ...c, eye: c.target.map((v, k) => v + (offset[k] / dist) * d) };
+    } else if (e.key === 'Home' || e.key === '0') {
+      this.reset();
+      e.preventDefault();
+      return true;
+    }
+    if (!next) return false;
+    e.preventDefault();
+    this.stopAnimation();
+    this.set(next);
+    return true;
   }
 
   makeControls(up) {
@@ -129,6 +207,7 @@ export class Navigation {
     this.stopAnimation();
     clearTimeout(this.urlTimer);
     this.view.canvas.removeEventListener('dblclick', this.onDoubleClick);
+    this.view.canvas.removeEventListener('keydown', this.onKey);
     this.controls.dispose();
   }
 }

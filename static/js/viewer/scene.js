@@ -2,7 +2,9 @@
 // shading as the server's renderer (shaders/render.wgsl: vertex colour or base albedo, times
 // ambient + (1 - ambient)·|n·v| from a headlight) so browser and server images agree; parts
 // are tinted per vertex (exact: marks come from original ids), the hovered/selected part gets
-// a bold outline (outline.js). Textured patches (docs/FORMAT.md "Textures") take their colour
+// a bold outline (outline.js). The reader may change the light (a softer headlight, or a raking
+// light from the upper left of the view that shows shallow relief, as conservators light
+// carvings) and the background; the defaults are the server's. Textured patches (docs/FORMAT.md "Textures") take their colour
 // from their atlas instead of their vertex colours, as the server's `albedo` does: the JPEG is
 // decoded to a bitmap here (until then the patch shows its vertex colours) and sampled as it
 // is, RGBA8 without sRGB decoding, bilinear and clamped, like the server's atlas sampler.
@@ -39,6 +41,9 @@ void main() {
 
 const FRAGMENT = /* glsl */ `
 uniform float uAmbient;
+// 0: headlight (from the eye, |n·v|, as the server shades); 1: from direction uLight (world)
+uniform float uLightMode;
+uniform vec3 uLight;
 uniform vec4 uHoverTint;
 uniform vec4 uSelectTint;
 uniform sampler2D uMap;
@@ -54,7 +59,7 @@ void main() {
   float l = length(n);
   n = l > 1e-20 ? n / l : v;
   if (!gl_FrontFacing) n = -n;
-  float ndl = abs(dot(n, v));
+  float ndl = uLightMode > 0.5 ? max(dot(n, uLight), 0.0) : abs(dot(n, v));
   vec3 albedo = uTextured > 0.5 ? textureLod(uMap, vUv, 0.0).rgb : vColor.rgb;
   vec3 rgb = albedo * (uAmbient + (1.0 - uAmbient) * ndl);
   if (vMark.y > 0.5) rgb = mix(rgb, uSelectTint.rgb, uSelectTint.a);
@@ -114,7 +119,7 @@ export class SceneView {
     this.renderer.setClearColor(BACKGROUND, 1);
     this.canvas = this.renderer.domElement;
     this.canvas.className = 'viewer-canvas';
-    this.canvas.setAttribute('aria-label', '3D view of the model');
+    this.canvas.setAttribute('aria-label', '3D view of the model: drag or use the arrow keys to turn it, Shift+arrows to move, + and − to zoom, Home to reset');
     this.canvas.tabIndex = 0;
     container.appendChild(this.canvas);
     this.scene = new THREE.Scene();
@@ -130,6 +135,8 @@ export class SceneView {
         uBaseColor: { value: new THREE.Vector4(...BASE_COLOR) },
         uHasColor: { value: table.hasColors ? 1 : 0 },
         uAmbient: { value: AMBIENT },
+        uLightMode: { value: 0 },
+        uLight: { value: new THREE.Vector3(0, 0, 1) },
         uHoverTint: { value: new THREE.Vector4(...HOVER_TINT) },
         uSelectTint: { value: new THREE.Vector4(...SELECT_TINT) },
         uMap: { value: this.noTexture },
@@ -150,6 +157,21 @@ export class SceneView {
     this.width = 1;
     this.height = 1;
     this.resize();
+  }
+
+  /**
+   * The light: `mode` 'headlight' (from the eye) or 'raking' (from the upper left of the view,
+   * grazing the surface), with `ambient` in [0, 1].
+   */
+  setLighting(mode, ambient) {
+    const u = this.material.uniforms;
+    u.uLightMode.value = mode === 'raking' ? 1 : 0;
+    u.uAmbient.value = ambient;
+    this.material.uniformsNeedUpdate = true;
+  }
+
+  setBackground(color) {
+    this.renderer.setClearColor(color, 1);
   }
 
   /** Matches the drawing buffer to the container's size. */
@@ -300,6 +322,15 @@ export class SceneView {
   /** Renders; `outline` (0 none, 1 hovered, 2 selected) draws the bold boundary. */
   render(outline = 0) {
     this.fitClipPlanes();
+    if (this.material.uniforms.uLightMode.value > 0.5) {
+      // Raking light, fixed to the view: from the upper left, grazing the surface facing us.
+      const m = this.camera.matrixWorld.elements;
+      const right = new THREE.Vector3(m[0], m[1], m[2]);
+      const up = new THREE.Vector3(m[4], m[5], m[6]);
+      const back = new THREE.Vector3(m[8], m[9], m[10]);
+      this.material.uniforms.uLight.value.copy(right.multiplyScalar(-0.75).addScaledVector(up, 0.45).addScaledVector(back, 0.5).normalize());
+      this.material.uniformsNeedUpdate = true;
+    }
     this.renderer.render(this.scene, this.camera);
     if (outline) this.outline.render(this.scene, this.camera, outline);
   }

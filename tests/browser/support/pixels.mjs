@@ -1,7 +1,8 @@
 // Pixel checks on viewer frames, computed inside the page (frames never leave it): a frame is
 // the canvas right after a render (`meshwikiViewer.snapshot()`), classified per pixel.
 
-/** Captures a frame under `name`; returns counts of surface, tinted and outline pixels. */
+/** Captures a frame under `name`; returns counts of surface, tinted and outline pixels, the
+ * background (the top-left pixel) and the mean brightness of pixels unlike it. */
 export function capture(page, name) {
   return page.evaluate(async (name) => {
     const url = window.meshwikiViewer.snapshot();
@@ -21,6 +22,9 @@ export function capture(page, name) {
     let hover = 0;
     let selected = 0;
     let outline = 0;
+    const corner = [d[0], d[1], d[2]];
+    let unlike = 0;
+    let brightness = 0;
     for (let i = 0; i < n; i++) {
       const r = d[i * 4];
       const gg = d[i * 4 + 1];
@@ -31,6 +35,10 @@ export function capture(page, name) {
       // Background 0x1d2026.
       const bg = Math.abs(r - 29) + Math.abs(gg - 32) + Math.abs(b - 38) <= 12;
       surface[i] = bg ? 0 : 1;
+      if (Math.abs(r - corner[0]) + Math.abs(gg - corner[1]) + Math.abs(b - corner[2]) > 12) {
+        unlike++;
+        brightness += (r + gg + b) / 3;
+      }
       count += surface[i];
       if (r > 200 && gg > 170 && b < 90) outline++;
       else if (r - b > 60 && gg - b > 30) hover++;
@@ -39,7 +47,7 @@ export function capture(page, name) {
     window.__frames = window.__frames || {};
     window.__frames[name] = { w: c.width, h: c.height, surface };
     window.__frames[`${name}:rgb`] = rgb;
-    return { width: c.width, height: c.height, surface: count, fraction: count / n, hover, selected, outline };
+    return { width: c.width, height: c.height, surface: count, fraction: count / n, hover, selected, outline, background: corner, meanSurface: unlike ? brightness / unlike : 0 };
   }, name);
 }
 

@@ -22,23 +22,29 @@ export async function drag(page, points, { modifiers = [] } = {}) {
   for (const m of modifiers) await page.keyboard.up(m);
 }
 
-/** Centroid and extent (CSS px inside the canvas) of the surface pixels of captured frame `name`. */
+/** Centroid (CSS px inside the canvas) of the surface pixels of captured frame `name` that no
+ * open drawer covers, and where the uncovered part of the view ends (`right`). */
 export function surfaceCentre(page, name) {
   return page.evaluate((name) => {
     const f = window.__frames[name];
+    const canvas = document.querySelector('.viewer-canvas');
+    const dpr = f.w / canvas.clientWidth;
+    // Only what an open drawer (the information panel, the assign step) leaves in sight.
+    const view = canvas.getBoundingClientRect();
+    const drawer = [...document.querySelectorAll('.drawer')].find((d) => !d.hidden);
+    const right = drawer ? Math.min(f.w, Math.floor((drawer.getBoundingClientRect().left - view.left) * dpr)) : f.w;
     let n = 0;
     let sx = 0;
     let sy = 0;
     for (let y = 0; y < f.h; y++) {
-      for (let x = 0; x < f.w; x++) {
+      for (let x = 0; x < right; x++) {
         if (!f.surface[y * f.w + x]) continue;
         n++;
         sx += x;
         sy += y;
       }
     }
-    const dpr = f.w / document.querySelector('.viewer-canvas').clientWidth;
-    return { x: sx / n / dpr, y: sy / n / dpr, pixels: n };
+    return { x: sx / n / dpr, y: sy / n / dpr, pixels: n, right: right / dpr };
   }, name);
 }
 

@@ -117,3 +117,17 @@ export async function seedPart(api, modelId, { title, caption = '', body = '', v
   await api.post(`/api/v1/parts/${part.id}/contents`, { content_id: content.id });
   return { part, content };
 }
+
+/** The unit direction the viewer first looks at model `modelId` from (the server's home view,
+ * the side the model's thumbnail shows), read from the model page's viewer data. */
+export async function homeDirection(api, modelId) {
+  const res = await api.request('GET', `/models/${modelId}`, { raw: true });
+  const html = await res.text();
+  const m = /<script type="application\/json" id="viewer-data">(.*?)<\/script>/s.exec(html);
+  if (!m) throw new Error(`the model page of ${modelId} has no viewer data`);
+  const home = JSON.parse(m[1]).home;
+  if (!home) throw new Error(`the model page of ${modelId} has no home view`);
+  const d = home.eye.map((v, k) => v - home.target[k]);
+  const l = Math.hypot(...d);
+  return d.map((v) => v / l);
+}
