@@ -1,15 +1,33 @@
 // Main pass of the headless renderer (system paper §3.3; buffers for selection §4.1.1, §4.1.2).
 //
-// Patches are drawn non-indexed from storage buffers: `vertex_index` gives the triangle and its
-// corner, `instance_index` (the draw's first instance) the draw record. Every corner outputs the
-// triangle's three original vertex ids (flat) and a one-hot barycentric; the fragment keeps the
-// id of the corner with the largest barycentric, so a pixel's id is always a vertex of the
-// triangle drawn there. Depth is reversed-Z with an infinite far plane: depth = near / view depth.
+// Patches are drawn indexed, straight from their buffers: positions, normals, colours and
+// texture coordinates are vertex attributes, the patch's triangles the index buffer, so the
+// rasteriser transforms each vertex once (a software rasteriser transforms on one thread) and
+// interpolates few varyings. `instance_index` (the draw's first instance) names the draw
+// record of the patch.
+//
+// Selection needs, per pixel, an original vertex id: the triangle corner nearest the pixel
+// centre, always a vertex of the triangle drawn there; part tints follow the same corner. The
+// `*_marked` and `fs_buffers` fragment shaders find it from `primitive_index`: they load the
+// triangle's three corners from the patch, and the pixel centre's perspective-correct
+// barycentrics are those of homogeneous rasterisation (Olano & Greer 1997: the centre's
+// normalised device point p lies on the ray through Σ bᵢ vᵢ, so bᵢ ∝ (vⱼ × vₖ) · p for the
+// clip-space (x, y, w) of the corners), valid even for corners behind the eye. The largest
+// wins (ties: the lowest corner). Plain images skip all of it. Depth is reversed-Z with an
+// infinite far plane: depth = near / view depth.
+//
+// `ALBEDO` (a pipeline constant) is where a patch's colour comes from: 0 the frame's base
+// colour (models without colour), 1 its vertex colours, 2 its texture atlas. Each patch is drawn
+// by the pipeline of its own, so no shader carries the others' varyings, loads or branches.
+
+enable primitive_index;
+
+override ALBEDO: u32 = 1u;
 
 struct Frame {
     view_proj: mat4x4<f32>,
     eye: vec4<f32>,
-    // x: ambient, y: diffuse, z: 1 when the model has colours, w: unused
+    // x: ambient, y: diffuse, z, w: unused
     light: vec4<f32>,
     // albedo of models without colour
     base_color: vec4<f32>,
@@ -23,15 +41,15 @@ struct Frame {
 
 struct Draw {
     node: u32,
+    // word offsets in the patch's buffer
     positions: u32,
-    normals: u32,
-    colors: u32,
     ids: u32,
     indices: u32,
     // offset of the per-vertex highlight masks in `masks`, 0xFFFFFFFF when none
     masks: u32,
-    // offset of the texture coordinates (unorm16 pairs), 0xFFFFFFFF when the patch has none
-    uvs: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -39,26 +57,49 @@ struct Draw {
 @group(0) @binding(2) var<storage, read> masks: array<u32>;
 // tint colours: rgb, a = strength; index 0 unused
 @group(0) @binding(3) var<uniform> palette: array<vec4<f32>, 256>;
-// one patch: f32 positions and normals (3 per vertex), RGBA8 colours, original ids, indices
+// one patch: f32 positions and normals (3 per vertex), RGBA8 colours, original ids, indices,
+// texture coordinates
 @group(1) @binding(0) var<storage, read> patch_data: array<u32>;
 // the patch's texture atlas (a white texel when it has none), sampled bilinearly
 @group(1) @binding(1) var atlas: texture_2d<f32>;
 @group(1) @binding(2) var atlas_sampler: sampler;
+
+struct VIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    // RGBA8 (unorm); unused when the model has no colours
+    @location(2) color: vec4<f32>,
+    // unorm16 pairs; unused when the patch has no atlas
+    @location(3) uv: vec2<f32>,
+}
 
 // Few varyings: a software rasteriser bins every triangle with its interpolants.
 struct VOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) normal: vec3<f32>,
     @location(1) color: vec3<f32>,
-    // barycentrics of corners 0 and 1
-    @location(2) bary: vec2<f32>,
-    @location(3) @interpolate(flat) ids: vec3<u32>,
-    // the corners' highlight masks, 9 bits each
-    @location(4) @interpolate(flat) masks: u32,
-    // node id, triangle index within the patch
-    @location(5) @interpolate(flat) node_tri: vec2<u32>,
-    // texture coordinates in the patch's atlas; x < 0 when untextured
-    @location(6) uv: vec2<f32>,
+    // texture coordinates in the patch's atlas (ALBEDO 2)
+    @location(2) uv: vec2<f32>,
+    @location(3) @interpolate(flat) draw: u32,
+}
+
+@vertex
+fn vs_main(v: VIn, @builtin(instance_index) ii: u32) -> VOut {
+    var out: VOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.normal = v.normal;
+    if (ALBEDO == 1u) {
+        out.color = v.color.rgb;
+    } else {
+        out.color = vec3<f32>(0.0);
+    }
+    if (ALBEDO == 2u) {
+        out.uv = v.uv;
+    } else {
+        out.uv = vec2<f32>(0.0);
+    }
+    out.draw = ii;
+    return out;
 }
 
 fn load_vec3(offset: u32, v: u32) -> vec3<f32> {
@@ -66,57 +107,48 @@ fn load_vec3(offset: u32, v: u32) -> vec3<f32> {
     return vec3<f32>(bitcast<f32>(patch_data[o]), bitcast<f32>(patch_data[o + 1u]), bitcast<f32>(patch_data[o + 2u]));
 }
 
+// Clip-space x, y, w of vertex `v` of draw `d`.
+fn clip_xyw(d: Draw, v: u32) -> vec3<f32> {
+    let c = frame.view_proj * vec4<f32>(load_vec3(d.positions, v), 1.0);
+    return vec3<f32>(c.x, c.y, c.w);
+}
+
+// The corner of triangle `tri` of draw `d` nearest the pixel centre `frag`, and the triangle.
+struct Corner {
+    k: u32,
+    tri: vec3<u32>,
+}
+
+fn nearest_corner(d: Draw, tri_index: u32, frag: vec4<f32>) -> Corner {
+    let base = d.indices + tri_index * 3u;
+    let t = vec3<u32>(patch_data[base], patch_data[base + 1u], patch_data[base + 2u]);
+    let v0 = clip_xyw(d, t.x);
+    let v1 = clip_xyw(d, t.y);
+    let v2 = clip_xyw(d, t.z);
+    // The pixel centre in normalised device coordinates (y up), homogeneous.
+    let p = vec3<f32>((frag.x - frame.center.x) / frame.center.x, (frame.center.y - frag.y) / frame.center.y, 1.0);
+    var b = vec3<f32>(dot(cross(v1, v2), p), dot(cross(v2, v0), p), dot(cross(v0, v1), p));
+    let s = b.x + b.y + b.z;
+    if (abs(s) > 0.0) {
+        b = b / s;
+    }
+    var c: Corner;
+    c.tri = t;
+    if (b.x >= b.y && b.x >= b.z) {
+        c.k = 0u;
+    } else if (b.y >= b.z) {
+        c.k = 1u;
+    } else {
+        c.k = 2u;
+    }
+    return c;
+}
+
 fn vertex_mask(d: Draw, v: u32) -> u32 {
     if (d.masks == 0xFFFFFFFFu) {
         return 0u;
     }
     return masks[d.masks + v];
-}
-
-@vertex
-fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VOut {
-    let d = draws[ii];
-    let tri = vi / 3u;
-    let corner = vi % 3u;
-    let base = d.indices + tri * 3u;
-    let t = vec3<u32>(patch_data[base], patch_data[base + 1u], patch_data[base + 2u]);
-    let v = t[corner];
-    let p = load_vec3(d.positions, v);
-    var out: VOut;
-    out.clip = frame.view_proj * vec4<f32>(p, 1.0);
-    out.normal = load_vec3(d.normals, v);
-    if (frame.light.z > 0.5) {
-        out.color = unpack4x8unorm(patch_data[d.colors + v]).rgb;
-    } else {
-        out.color = frame.base_color.rgb;
-    }
-    out.bary = vec2<f32>(select(0.0, 1.0, corner == 0u), select(0.0, 1.0, corner == 1u));
-    out.ids = vec3<u32>(patch_data[d.ids + t.x], patch_data[d.ids + t.y], patch_data[d.ids + t.z]);
-    out.masks = vertex_mask(d, t.x) | (vertex_mask(d, t.y) << 9u) | (vertex_mask(d, t.z) << 18u);
-    out.node_tri = vec2<u32>(d.node, tri);
-    if (d.uvs != 0xFFFFFFFFu) {
-        out.uv = unpack2x16unorm(patch_data[d.uvs + v]);
-    } else {
-        out.uv = vec2<f32>(-1.0, -1.0);
-    }
-    return out;
-}
-
-// Corner with the largest barycentric coordinate (ties: lowest corner).
-fn nearest_corner(b2: vec2<f32>) -> u32 {
-    let b = vec3<f32>(b2, 1.0 - b2.x - b2.y);
-    if (b.x >= b.y && b.x >= b.z) {
-        return 0u;
-    }
-    if (b.y >= b.z) {
-        return 1u;
-    }
-    return 2u;
-}
-
-// Highlight mask of corner `k`.
-fn corner_mask(in: VOut, k: u32) -> u32 {
-    return (in.masks >> (9u * k)) & 0x1FFu;
 }
 
 // Unit vector from the surface at pixel `frag` towards the eye.
@@ -140,13 +172,15 @@ fn facing_normal(in: VOut, front: bool) -> vec3<f32> {
     return n;
 }
 
-// Surface colour: the patch's texture, else the vertex colour. Texels, like vertex colours, are
-// sRGB bytes taken as they are.
+// Surface colour (see ALBEDO). Texels, like vertex colours, are sRGB bytes taken as they are.
 fn albedo(in: VOut) -> vec3<f32> {
-    if (in.uv.x >= 0.0) {
+    if (ALBEDO == 2u) {
         return textureSampleLevel(atlas, atlas_sampler, in.uv, 0.0).rgb;
     }
-    return in.color.rgb;
+    if (ALBEDO == 1u) {
+        return in.color.rgb;
+    }
+    return frame.base_color.rgb;
 }
 
 // Headlight plus ambient, then the part tint.
@@ -162,15 +196,34 @@ fn shade(in: VOut, n: vec3<f32>, mask: u32) -> vec4<f32> {
     return vec4<f32>(clamp(rgb, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
 }
 
+// A picture without parts marked: the colour alone.
+@fragment
+fn fs_image(in: VOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    return shade(in, facing_normal(in, front), 0u);
+}
+
 struct ImageOut {
     @location(0) color: vec4<f32>,
     @location(1) mask: u32,
 }
 
+// A picture with parts marked, on a patch that holds none of their vertices: the mask says
+// only "covered".
 @fragment
-fn fs_image(in: VOut, @builtin(front_facing) front: bool) -> ImageOut {
-    let k = nearest_corner(in.bary);
-    let mask = corner_mask(in, k);
+fn fs_image_unmarked(in: VOut, @builtin(front_facing) front: bool) -> ImageOut {
+    var out: ImageOut;
+    out.color = shade(in, facing_normal(in, front), 0u);
+    out.mask = 0x80000000u;
+    return out;
+}
+
+// A picture with parts marked, on a patch holding some of their vertices: tint and outline
+// bit of the nearest corner.
+@fragment
+fn fs_image_marked(in: VOut, @builtin(front_facing) front: bool, @builtin(primitive_index) prim: u32) -> ImageOut {
+    let d = draws[in.draw];
+    let c = nearest_corner(d, prim, in.clip);
+    let mask = vertex_mask(d, c.tri[c.k]);
     var out: ImageOut;
     out.color = shade(in, facing_normal(in, front), mask);
     out.mask = mask | 0x80000000u;
@@ -198,13 +251,15 @@ struct BuffersOut {
 }
 
 @fragment
-fn fs_buffers(in: VOut, @builtin(front_facing) front: bool) -> BuffersOut {
-    let k = nearest_corner(in.bary);
-    let mask = corner_mask(in, k);
+fn fs_buffers(in: VOut, @builtin(front_facing) front: bool, @builtin(primitive_index) prim: u32) -> BuffersOut {
+    let d = draws[in.draw];
+    let c = nearest_corner(d, prim, in.clip);
+    let v = c.tri[c.k];
+    let mask = vertex_mask(d, v);
     let n = facing_normal(in, front);
     var out: BuffersOut;
     out.color = shade(in, n, mask);
     out.normal = oct_encode(n);
-    out.ids = vec4<u32>(in.node_tri.x, in.ids[k], in.node_tri.y, mask);
+    out.ids = vec4<u32>(d.node, patch_data[d.ids + v], prim, mask);
     return out;
 }

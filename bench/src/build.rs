@@ -1,8 +1,10 @@
 //! `meshwiki-bench build FILE`: builds the LOD hierarchy of a scan (or of `synth:N`, the
 //! generated relief of about N triangles, written as PLY first and not timed) into a scratch
-//! directory and prints throughput (input triangles/s), peak memory, output bytes per input
-//! triangle and output size, with ratios to the reference: Nexus' `nxsbuild` on the same
-//! machine kind (2 cores) building the relief of `../shared/tools/make_mesh.py`.
+//! directory and prints throughput (input triangles/s), wall and CPU time, peak memory, output
+//! bytes per input triangle and output size. Then, when Nexus' tools are found (`nexus.rs`),
+//! `nxsbuild` and `nxscompress` run on the same input one after the other in the same run, and
+//! the ratios are printed side by side; without them the fixed figures of an earlier
+//! `nxsbuild` run on the same machine kind stand in, labelled as such.
 
 use std::path::{Path, PathBuf};
 
@@ -13,6 +15,8 @@ use meshwiki_engine::lod::BuildOptions;
 use meshwiki_engine::mesh::write_relief_ply;
 
 use meshwiki::terminal::{Bar, check_input, print_summary};
+
+use crate::nexus;
 
 /// Options of `bench build`.
 #[derive(Debug, Clone, ClapArgs)]
@@ -34,6 +38,12 @@ pub struct Args {
     /// zstd level of the patch blobs (default: the build's; 0 stores them uncompressed).
     #[arg(long, value_parser = clap::value_parser!(i32).range(0..=22))]
     pub zstd_level: Option<i32>,
+    /// Nexus' tools (the folder or the `nxsbuild` binary; default: `../shared/tools/nexus`).
+    #[arg(long)]
+    pub nexus: Option<PathBuf>,
+    /// Do not run Nexus' builder (the fixed reference figures are printed instead).
+    #[arg(long)]
+    pub no_nexus: bool,
 }
 
 /// One reference measurement of `nxsbuild`.
@@ -68,7 +78,8 @@ impl Drop for Scratch {
     }
 }
 
-fn compare(triangles: u64, seconds: f64, peak: Option<u64>, output: u64) {
+/// The fallback when nxsbuild does not run here: fixed figures from an earlier run.
+fn compare_fixed(triangles: u64, seconds: f64, peak: Option<u64>, output: u64) {
     let Some(r) = REFERENCES.iter().min_by(|a, b| {
         let d = |x: &Reference| (x.triangles as f64 / triangles.max(1) as f64).ln().abs();
         d(a).total_cmp(&d(b))
@@ -82,8 +93,9 @@ fn compare(triangles: u64, seconds: f64, peak: Option<u64>, output: u64) {
         format!("{lo:.0}–{hi:.0} s")
     };
     println!(
-        "reference: nxsbuild on the {:.0}M-triangle relief (make_mesh.py, same machine kind): \
-         {time}, {:.0} MB peak, {:.1} MB .nxz",
+        "reference (FALLBACK: fixed figures of an earlier run, not measured now): nxsbuild on \
+         the {:.0}M-triangle relief (make_mesh.py, same machine kind): {time}, {:.0} MB peak, \
+         {:.1} MB .nxz",
         r.triangles as f64 / 1e6,
         r.peak_bytes / 1e6,
         r.output_bytes / 1e6
@@ -189,23 +201,140 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         );
     }
     let bar = Bar::new();
+    let cpu_before = nexus::own_cpu_seconds();
     let report = run_build(&Source::File(input.clone()), &output, &options, &bar);
+    let cpu = nexus::own_cpu_seconds() - cpu_before;
     bar.0.finish_and_clear();
     let report = match report {
         Ok(r) => r.report,
         Err(e) => bail!("build failed: {e}"),
     };
     print_summary(&report);
-    compare(
-        report.import.triangles,
+    println!(
+        "  CPU time {cpu:.1} s for {:.1} s wall: {:.2} cores busy on average",
         report.seconds,
-        report.peak_rss_bytes,
-        report.output_bytes,
+        cpu / report.seconds.max(1e-9)
     );
+    let ours = Measured {
+        wall: report.seconds,
+        cpu,
+        peak: report.peak_rss_bytes,
+        output: report.output_bytes,
+    };
+    let tools = if args.no_nexus {
+        None
+    } else {
+        nexus::locate(args.nexus.as_deref())
+    };
+    match tools {
+        Some(tools) if nexus::reads(&input) => {
+            println!(
+                "\nnxsbuild + nxscompress ({}) on the same input, after meshwiki's build:",
+                tools.display()
+            );
+            match nexus::run(&tools, &input, &dir) {
+                Ok(nx) => side_by_side(&ours, &nx),
+                Err(e) => {
+                    println!("  nxsbuild did not run: {e:#}");
+                    compare_fixed(
+                        report.import.triangles,
+                        report.seconds,
+                        report.peak_rss_bytes,
+                        report.output_bytes,
+                    );
+                }
+            }
+        }
+        Some(_) => {
+            println!("\nnxsbuild reads PLY, OBJ and STL only: not run on this input");
+            compare_fixed(
+                report.import.triangles,
+                report.seconds,
+                report.peak_rss_bytes,
+                report.output_bytes,
+            );
+        }
+        None => {
+            if !args.no_nexus {
+                println!(
+                    "\nNexus' tools not found (../shared/tools/nexus/nxsbuild, or --nexus DIR)"
+                );
+            }
+            compare_fixed(
+                report.import.triangles,
+                report.seconds,
+                report.peak_rss_bytes,
+                report.output_bytes,
+            );
+        }
+    }
     if args.out.is_some() {
         println!("LOD file kept at {}", output.display());
     }
     Ok(())
+}
+
+/// meshwiki's build as measured in this run.
+struct Measured {
+    wall: f64,
+    cpu: f64,
+    peak: Option<u64>,
+    output: u64,
+}
+
+/// Prints both builds of this run side by side, with ratios (how many times nxsbuild's cost
+/// meshwiki's is: above 1 means meshwiki is ahead, for time, memory and size alike).
+fn side_by_side(ours: &Measured, nx: &nexus::Run) {
+    let total = nx.total();
+    let mb = |b: u64| format!("{:.2} MB", b as f64 / 1e6);
+    println!(
+        "  {:<12} {:>22} {:>14} {:>10}",
+        "", "nxsbuild (+ compress)", "meshwiki", "ratio"
+    );
+    let compress = |f: fn(&nexus::Cost) -> f64| {
+        nx.compress
+            .as_ref()
+            .map(|c| format!(" (+{:.1})", f(c)))
+            .unwrap_or_default()
+    };
+    println!(
+        "  {:<12} {:>22} {:>14} {:>9.2}×",
+        "wall s",
+        format!("{:.1}{}", nx.build.wall, compress(|c| c.wall)),
+        format!("{:.1}", ours.wall),
+        total.wall / ours.wall.max(1e-9)
+    );
+    println!(
+        "  {:<12} {:>22} {:>14} {:>9.2}×",
+        "CPU s",
+        format!("{:.1}{}", nx.build.cpu, compress(|c| c.cpu)),
+        format!("{:.1}", ours.cpu),
+        total.cpu / ours.cpu.max(1e-9)
+    );
+    if let Some(peak) = ours.peak {
+        println!(
+            "  {:<12} {:>22} {:>14} {:>9.2}×",
+            "peak memory",
+            mb(total.peak_bytes),
+            mb(peak),
+            total.peak_bytes as f64 / peak.max(1) as f64
+        );
+    }
+    let (label, theirs) = match nx.nxz_bytes {
+        Some(b) => (".nxz", b),
+        None => (".nxs", nx.nxs_bytes),
+    };
+    println!(
+        "  {:<12} {:>22} {:>14} {:>9.2}×",
+        "output",
+        format!("{} {label}", mb(theirs)),
+        mb(ours.output),
+        theirs as f64 / ours.output.max(1) as f64
+    );
+    println!(
+        "  (ratios are nxsbuild's figure over meshwiki's: above 1 means meshwiki is ahead; \
+         wall and CPU count nxscompress too)"
+    );
 }
 
 fn display(p: &Path) -> String {

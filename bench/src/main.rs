@@ -5,6 +5,7 @@
 
 mod build;
 mod maxflow;
+mod nexus;
 mod render;
 mod search;
 mod select;

@@ -199,8 +199,15 @@ pub struct BackprojectionStats {
 pub struct SelectionTimings {
     /// Rendering the view's buffers.
     pub render: f64,
-    /// Selecting the pixels (the graph cut, or the click).
+    /// Selecting the pixels (the graph cut, or the click): `seeds`, `graph` and `maxflow`
+    /// together.
     pub cut: f64,
+    /// Of `cut`: placing the seeds from the strokes (the lasso's whole work).
+    pub seeds: f64,
+    /// Of `cut`: building the graph on the strokes' window (0 without a graph cut).
+    pub graph: f64,
+    /// Of `cut`: solving the maximum flow (0 without a graph cut).
+    pub maxflow: f64,
     /// Back-projecting to original vertex ids.
     pub backproject: f64,
     /// The whole request.
@@ -600,6 +607,9 @@ impl App {
             timings_ms: SelectionTimings {
                 render: outcome.render_ms,
                 cut: outcome.cut_ms,
+                seeds: outcome.seeds_ms,
+                graph: outcome.cut.as_ref().map_or(0.0, |c| c.build_ms),
+                maxflow: outcome.cut.as_ref().map_or(0.0, |c| c.solve_ms),
                 backproject: outcome.backprojection.ms,
                 total: total_ms,
             },

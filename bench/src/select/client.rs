@@ -42,8 +42,46 @@ pub struct Draft {
     pub vertex_count: u64,
     /// Wall time of the POST (strokes in, draft out), milliseconds.
     pub latency_ms: f64,
-    /// The server's own total.
-    pub server_ms: f64,
+    /// The server's own timings of it.
+    pub stages: Stages,
+}
+
+/// The server's timings of one selection (its `timings_ms`), milliseconds.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Stages {
+    pub render: f64,
+    pub seeds: f64,
+    pub graph: f64,
+    pub maxflow: f64,
+    pub backproject: f64,
+    pub total: f64,
+}
+
+impl Stages {
+    /// The stages as `(name, milliseconds)`, in the order they run.
+    pub fn named(&self) -> [(&'static str, f64); 6] {
+        [
+            ("render", self.render),
+            ("seeds", self.seeds),
+            ("graph", self.graph),
+            ("max-flow", self.maxflow),
+            ("back-proj.", self.backproject),
+            ("server", self.total),
+        ]
+    }
+
+    fn of(v: &Value) -> Stages {
+        let t = &v["timings_ms"];
+        let f = |k: &str| t[k].as_f64().unwrap_or(f64::NAN);
+        Stages {
+            render: f("render"),
+            seeds: f("seeds"),
+            graph: f("graph"),
+            maxflow: f("maxflow"),
+            backproject: f("backproject"),
+            total: f("total"),
+        }
+    }
 }
 
 /// The camera of a request, as the selection API takes it.
@@ -206,7 +244,7 @@ impl Api {
                     id: v["id"].as_str().context("no draft id")?.to_string(),
                     vertex_count: v["vertex_count"].as_u64().unwrap_or(0),
                     latency_ms,
-                    server_ms: v["timings_ms"]["total"].as_f64().unwrap_or(f64::NAN),
+                    stages: Stages::of(&v),
                 }))
             }
             400..=499 => Ok(Err(format!("{}: {}", r.status, r.text()))),

@@ -16,7 +16,7 @@ use meshwiki_engine::select::mask::{self, StrokeMask};
 use roaring::RoaringBitmap;
 use serde::Serialize;
 
-use super::client::Api;
+use super::client::{Api, Stages};
 use super::strokes::{self, Rng, UserModel};
 use super::truth::{Region, Segmentation};
 
@@ -49,7 +49,8 @@ pub struct ToolResult {
     pub strokes: usize,
     /// Wall time of each POST, milliseconds (none when the first was refused).
     pub latency_ms: Vec<f64>,
-    pub server_ms: Vec<f64>,
+    /// The server's timings of each POST, per stage.
+    pub stages: Vec<Stages>,
     /// The server's message when it refused the strokes.
     pub refused: Option<String>,
 }
@@ -147,7 +148,7 @@ fn frame(
 struct Submitted {
     set: RoaringBitmap,
     latency_ms: Vec<f64>,
-    server_ms: Vec<f64>,
+    stages: Vec<Stages>,
     refused: Option<String>,
 }
 
@@ -171,7 +172,7 @@ fn score(
         selected: got.set.len(),
         strokes: got.latency_ms.len(),
         latency_ms: got.latency_ms.clone(),
-        server_ms: got.server_ms.clone(),
+        stages: got.stages.clone(),
         refused: got.refused.clone(),
     }
 }
@@ -190,7 +191,7 @@ fn submit(
     let mut out = Submitted {
         set: RoaringBitmap::new(),
         latency_ms: Vec::new(),
-        server_ms: Vec::new(),
+        stages: Vec::new(),
         refused: None,
     };
     let mut draft: Option<String> = None;
@@ -210,7 +211,7 @@ fn submit(
                 }
                 count = d.vertex_count;
                 out.latency_ms.push(d.latency_ms);
-                out.server_ms.push(d.server_ms);
+                out.stages.push(d.stages);
                 if let Some(old) = draft.replace(d.id) {
                     api.discard(&old)?;
                 }

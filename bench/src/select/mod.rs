@@ -377,6 +377,41 @@ fn report(
                    "latency_p50_ms": l50, "latency_p95_ms": l95}),
         );
     }
+    // Where the server's time goes, per tool (p50 of each stage over every POST).
+    let names: Vec<&str> = client::Stages::named(&client::Stages {
+        render: 0.0,
+        seeds: 0.0,
+        graph: 0.0,
+        maxflow: 0.0,
+        backproject: 0.0,
+        total: 0.0,
+    })
+    .iter()
+    .map(|(n, _)| *n)
+    .collect();
+    print!("  {:<18}", "server p50, ms");
+    for n in &names {
+        print!(" {n:>10}");
+    }
+    println!();
+    for (k, (name, label)) in TOOLS.iter().enumerate() {
+        let stages: Vec<client::Stages> = results
+            .iter()
+            .flat_map(|r| r.tools[k].stages.iter().copied())
+            .collect();
+        print!("  {label:<18}");
+        let mut per_stage = serde_json::Map::new();
+        for (i, n) in names.iter().enumerate() {
+            let v: Vec<f64> = stages.iter().map(|s| s.named()[i].1).collect();
+            let p50 = percentile(&v, 0.5);
+            print!(" {p50:>10.1}");
+            per_stage.insert((*n).to_string(), json!(p50));
+        }
+        println!();
+        if let Some(serde_json::Value::Object(o)) = summary.get_mut(*name) {
+            o.insert("stages_p50_ms".into(), serde_json::Value::Object(per_stage));
+        }
+    }
     let wins = results
         .iter()
         .filter(|r| r.tools[0].error < r.tools[2].error)

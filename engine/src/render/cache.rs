@@ -1,8 +1,10 @@
 //! Out-of-core GPU patch cache (system paper §3.3: patches are loaded on demand, so a model larger
 //! than memory renders with only the patches of the current cut resident).
 //!
-//! Entries are keyed by (model, node) and hold one storage buffer per patch (positions, normals,
-//! colours, original ids, indices) plus a CPU copy of the original ids for highlight masks. The
+//! Entries are keyed by (model, node) and hold one buffer per patch (positions, normals,
+//! colours, original ids, indices, texture coordinates), drawn from as vertex and index buffer
+//! and read by the fragment shaders as storage, plus a CPU copy of the original ids for
+//! highlight masks. The
 //! budget bounds the resident bytes; least recently used entries not pinned by a render in
 //! flight are evicted first. Pinned entries stay alive through their `Arc` until that render
 //! ends, so the peak is the budget plus the batches of the renders in flight.
@@ -78,7 +80,9 @@ pub struct GpuPatch {
     pub triangles: u32,
     pub layout: PatchLayout,
     pub bind_group: wgpu::BindGroup,
-    _buffer: wgpu::Buffer,
+    /// The patch's streams: a storage buffer (ids, for the fragment shaders) that is also the
+    /// vertex and index buffer of its draw.
+    pub buffer: wgpu::Buffer,
     _atlas: Option<wgpu::Texture>,
     /// Original vertex ids (CPU copy, for highlight masks).
     pub original_ids: Vec<u32>,
@@ -297,7 +301,8 @@ impl PatchCache {
         };
         let layout = PatchLayout::with_uvs(n as u32, t as u32, colors, image.is_some());
         let words_len = (layout.words as usize).max(1);
-        let mut usage = wgpu::BufferUsages::STORAGE;
+        let mut usage =
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX;
         if shared_memory {
             usage |= wgpu::BufferUsages::MAP_WRITE;
         }
@@ -389,7 +394,7 @@ impl PatchCache {
             triangles: t as u32,
             layout,
             bind_group,
-            _buffer: buffer,
+            buffer,
             _atlas: atlas,
             original_ids: patch.original_ids.clone(),
             id_range,

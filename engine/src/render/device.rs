@@ -33,7 +33,7 @@ impl AdapterChoice {
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum DeviceError {
     #[error(
-        "no GPU adapter found{0}: install a Vulkan driver (on Linux without a GPU: Mesa's lavapipe, package mesa-vulkan-drivers)"
+        "no GPU adapter found{0} that can draw from storage buffers and tell primitives apart (primitive_index): install a Vulkan driver (on Linux without a GPU: Mesa's lavapipe, package mesa-vulkan-drivers)"
     )]
     NoAdapter(&'static str),
     #[error("adapter {adapter} lacks what rendering needs: {missing}")]
@@ -91,7 +91,9 @@ impl GpuDevice {
                 })
                 .filter(|a| {
                     let d = a.get_downlevel_capabilities();
+                    // The exact id buffer needs each fragment's triangle (primitive_index).
                     d.flags.contains(wgpu::DownlevelFlags::VERTEX_STORAGE)
+                        && a.features().contains(wgpu::Features::PRIMITIVE_INDEX)
                 })
                 .collect();
         adapters.sort_by_key(|a| rank(&a.get_info()));
@@ -124,9 +126,9 @@ impl GpuDevice {
             .features()
             .contains(wgpu::Features::MAPPABLE_PRIMARY_BUFFERS);
         let required_features = if shared_memory {
-            wgpu::Features::MAPPABLE_PRIMARY_BUFFERS
+            wgpu::Features::MAPPABLE_PRIMARY_BUFFERS | wgpu::Features::PRIMITIVE_INDEX
         } else {
-            wgpu::Features::empty()
+            wgpu::Features::PRIMITIVE_INDEX
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("meshwiki render"),

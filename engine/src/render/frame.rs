@@ -7,10 +7,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{Mat4, Vec3, Vec4};
+use rayon::prelude::*;
 use wgpu::util::DeviceExt;
 
 use super::cache::{GpuPatch, node_bytes};
 use super::highlight::{self, Prepared};
+use super::pipeline::{Albedo, Variant};
 use super::{
     COVERED_BIT, Frame, GPU_TIMEOUT, IdBuffer, NO_ID, NO_NODE, Outputs, RenderError, RenderModel,
     RenderOptions, RenderStats, Renderer, pipeline,
@@ -30,17 +32,27 @@ struct FrameUniform {
     center: [f32; 4],
 }
 
+/// A patch's draw record (`Draw` in `render.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct DrawRecord {
     node: u32,
     positions: u32,
-    normals: u32,
-    colors: u32,
     ids: u32,
     indices: u32,
     masks: u32,
-    uvs: u32,
+    pad: [u32; 3],
+}
+
+/// What the main pass draws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// Colour alone.
+    Plain,
+    /// Colour and the highlight mask (parts tinted or outlined).
+    Marked,
+    /// Colour, normal and ids (selection).
+    Buffers,
 }
 
 #[repr(C)]
@@ -53,8 +65,8 @@ struct OutlineUniform {
 /// Render targets of one frame.
 struct Targets {
     color: wgpu::Texture,
-    /// Mask (image mode) or packed normal (buffers mode).
-    second: wgpu::Texture,
+    /// Mask (marked images) or packed normal (buffers); none for plain images.
+    second: Option<wgpu::Texture>,
     /// Ids (buffers mode only).
     ids: Option<wgpu::Texture>,
     depth: wgpu::Texture,
@@ -122,22 +134,18 @@ struct Globals {
 }
 
 impl Targets {
-    /// The targets of a `w`×`h` frame: buffers mode (normals and ids) or image mode (mask).
-    fn new(device: &wgpu::Device, w: u32, h: u32, buffers_mode: bool) -> Targets {
+    /// The targets of a `w`×`h` frame of `mode`.
+    fn new(device: &wgpu::Device, w: u32, h: u32, mode: Mode) -> Targets {
+        let second = match mode {
+            Mode::Plain => None,
+            Mode::Marked => Some(texture(device, "mask", w, h, pipeline::MASK_FORMAT)),
+            Mode::Buffers => Some(texture(device, "normal", w, h, pipeline::NORMAL_FORMAT)),
+        };
         Targets {
             color: texture(device, "color", w, h, pipeline::COLOR_FORMAT),
-            second: texture(
-                device,
-                if buffers_mode { "normal" } else { "mask" },
-                w,
-                h,
-                if buffers_mode {
-                    pipeline::NORMAL_FORMAT
-                } else {
-                    pipeline::MASK_FORMAT
-                },
-            ),
-            ids: buffers_mode.then(|| texture(device, "ids", w, h, pipeline::IDS_FORMAT)),
+            second,
+            ids: (mode == Mode::Buffers)
+                .then(|| texture(device, "ids", w, h, pipeline::IDS_FORMAT)),
             depth: texture(device, "depth", w, h, pipeline::DEPTH_FORMAT),
         }
     }
@@ -145,7 +153,10 @@ impl Targets {
     fn views(&self) -> TargetViews {
         TargetViews {
             color: self.color.create_view(&Default::default()),
-            second: self.second.create_view(&Default::default()),
+            second: self
+                .second
+                .as_ref()
+                .map(|t| t.create_view(&Default::default())),
             ids: self
                 .ids
                 .as_ref()
@@ -158,7 +169,7 @@ impl Targets {
 /// Views of the [`Targets`].
 struct TargetViews {
     color: wgpu::TextureView,
-    second: wgpu::TextureView,
+    second: Option<wgpu::TextureView>,
     ids: Option<wgpu::TextureView>,
     depth: wgpu::TextureView,
 }
@@ -188,31 +199,45 @@ impl Renderer {
         let device = &self.gpu.device;
         let (w, h) = (camera.width, camera.height);
         let outputs = options.outputs;
-        let targets = Targets::new(device, w, h, outputs.normal || outputs.ids);
-        let views = targets.views();
-        let globals = self.globals(model, camera, options, prepared, near);
+        let mode = if outputs.normal || outputs.ids {
+            Mode::Buffers
+        } else if !prepared.is_empty() {
+            Mode::Marked
+        } else {
+            Mode::Plain
+        };
         let mut stats = RenderStats::default();
-        let load_time = self.main_pass(
-            model, options, prepared, nodes, &views, &globals, &mut stats,
+        let t = Instant::now();
+        let targets = Targets::new(device, w, h, mode);
+        let views = targets.views();
+        let globals = self.globals(camera, options, prepared, near);
+        stats.profile.targets_ms = ms(t);
+        let (load_time, mut encoder, pinned) = self.main_pass(
+            model, options, prepared, nodes, &views, &globals, mode, &mut stats,
         )?;
         stats.load_ms = load_time.as_secs_f64() * 1e3;
 
-        let mut encoder = device.create_command_encoder(&Default::default());
+        // The last batch, the outline and the copies out go in one submission.
+        let t = Instant::now();
         let outlined = (outputs.color && prepared.any_outline && options.outline_width > 0)
             .then(|| self.outline_pass(&mut encoder, &views, options, w, h));
         let color = outlined.as_ref().unwrap_or(&targets.color);
         let reads = record_reads(device, &mut encoder, &targets, color, outputs, w, h);
-        let index = self.gpu.queue.submit([encoder.finish()]);
-        let data = read_all(device, &reads.buffers, index, w, h)?;
-        stats.draw_ms = draw_start.elapsed().saturating_sub(load_time).as_secs_f64() * 1e3;
-        Ok(decode_frame(&reads, &data, outputs, near, w, h, stats))
+        let commands = encoder.finish();
+        stats.profile.encode_ms += ms(t);
+        let t = Instant::now();
+        let index = self.gpu.queue.submit([commands]);
+        stats.profile.submit_ms += ms(t);
+        let mut frame = read_frame(device, &reads, index, outputs, near, w, h, stats)?;
+        drop(pinned);
+        frame.stats.draw_ms = draw_start.elapsed().saturating_sub(load_time).as_secs_f64() * 1e3;
+        Ok(frame)
     }
 
     /// The frame's uniforms: view-projection (reversed Z, `near`), eye, lighting, the pixel
     /// basis of point sprites, and the highlight palette.
     fn globals(
         &self,
-        model: &RenderModel,
         camera: &Camera,
         options: &RenderOptions,
         prepared: &Prepared<'_>,
@@ -220,13 +245,7 @@ impl Renderer {
     ) -> Globals {
         let device = &self.gpu.device;
         let (w, h) = (camera.width, camera.height);
-        let colors = model.lod.has_colors();
-        let light = [
-            options.ambient,
-            1.0 - options.ambient,
-            if colors { 1.0 } else { 0.0 },
-            0.0,
-        ];
+        let light = [options.ambient, 1.0 - options.ambient, 0.0, 0.0];
         let basis = camera.basis();
         let scale = camera.pixel_scale();
         let frame_uniform = FrameUniform {
@@ -255,7 +274,9 @@ impl Renderer {
 
     /// The main pass: the cut in batches of at most `batch_bytes` of patches (and of the cache
     /// and the device's largest storage binding), each loaded, drawn and finished before the
-    /// next is pinned. The first batch clears the targets. Returns the time spent loading.
+    /// next is pinned. The first batch clears the targets. Returns the time spent loading, and
+    /// the last batch recorded but not submitted (the frame's last commands join it: a second
+    /// submission would wait for the first on some adapters) with its patches, still pinned.
     #[allow(clippy::too_many_arguments)]
     fn main_pass(
         &self,
@@ -265,8 +286,9 @@ impl Renderer {
         nodes: &[u32],
         views: &TargetViews,
         globals: &Globals,
+        mode: Mode,
         stats: &mut RenderStats,
-    ) -> Result<Duration, RenderError> {
+    ) -> Result<(Duration, wgpu::CommandEncoder, Vec<Arc<GpuPatch>>), RenderError> {
         let device = &self.gpu.device;
         let colors = model.lod.has_colors();
         let records = model.lod.nodes();
@@ -277,11 +299,10 @@ impl Renderer {
             .min(self.options.cache_bytes)
             .min(max_binding)
             .max(1);
-        let buffers_mode = options.outputs.normal || options.outputs.ids;
         let mut start = 0usize;
         let mut first = true;
         let mut load_time = Duration::ZERO;
-        while first || start < nodes.len() {
+        loop {
             let mut end = start;
             let mut bytes = 0u64;
             while end < nodes.len() {
@@ -295,50 +316,57 @@ impl Renderer {
             let t_load = Instant::now();
             let patches = self.acquire(model, &nodes[start..end], stats)?;
             load_time += t_load.elapsed();
-            let bind = self.batch_bindings(&patches, prepared, globals, stats);
+            let t = Instant::now();
+            let (bind, marked) = self.batch_bindings(&patches, prepared, globals, stats);
             let mut encoder = device.create_command_encoder(&Default::default());
             encode_batch(
+                device,
                 &mut encoder,
                 views,
                 options,
                 first,
-                if buffers_mode {
-                    &self.pipelines.buffers
-                } else {
-                    &self.pipelines.image
-                },
+                &self.pipelines,
+                mode,
                 &bind,
                 &patches,
+                &marked,
             );
-            let index = self.gpu.queue.submit([encoder.finish()]);
+            stats.profile.encode_ms += ms(t);
             start = end;
             first = false;
-            if start < nodes.len() {
-                // Bound memory: let this batch finish before pinning the next one.
-                device
-                    .poll(wgpu::PollType::Wait {
-                        submission_index: Some(index),
-                        timeout: Some(GPU_TIMEOUT),
-                    })
-                    .map_err(|e| RenderError::Gpu(e.to_string()))?;
+            if start >= nodes.len() {
+                return Ok((load_time, encoder, patches));
             }
+            // Bound memory: let this batch finish before pinning the next one.
+            let t = Instant::now();
+            let index = self.gpu.queue.submit([encoder.finish()]);
+            stats.profile.submit_ms += ms(t);
+            let t = Instant::now();
+            device
+                .poll(wgpu::PollType::Wait {
+                    submission_index: Some(index),
+                    timeout: Some(GPU_TIMEOUT),
+                })
+                .map_err(|e| RenderError::Gpu(e.to_string()))?;
+            stats.profile.gpu_ms += ms(t);
             drop(patches);
         }
-        Ok(load_time)
     }
 
     /// The bind group of one batch: the frame's uniforms, one draw record per patch (where its
-    /// streams lie, and its highlight masks) and the masks themselves.
+    /// streams lie, and its highlight masks) and the masks themselves; and whether each patch
+    /// holds marked vertices.
     fn batch_bindings(
         &self,
         patches: &[Arc<GpuPatch>],
         prepared: &Prepared<'_>,
         globals: &Globals,
         stats: &mut RenderStats,
-    ) -> wgpu::BindGroup {
+    ) -> (wgpu::BindGroup, Vec<bool>) {
         let device = &self.gpu.device;
         let mut masks: Vec<u32> = Vec::new();
         let mut highlighted = 0u64;
+        let mut marked = Vec::with_capacity(patches.len());
         let draws: Vec<DrawRecord> = patches
             .iter()
             .map(|p| {
@@ -353,15 +381,14 @@ impl Renderer {
                     masks.extend_from_slice(&m);
                     o
                 });
+                marked.push(offset != u32::MAX);
                 DrawRecord {
                     node: p.node,
                     positions: p.layout.positions,
-                    normals: p.layout.normals,
-                    colors: p.layout.colors,
                     ids: p.layout.ids,
                     indices: p.layout.indices,
                     masks: offset,
-                    uvs: p.layout.uvs,
+                    pad: [0; 3],
                 }
             })
             .collect();
@@ -387,7 +414,7 @@ impl Renderer {
             contents: bytemuck::cast_slice(&masks),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
             layout: &self.pipelines.frame_layout,
             entries: &[
@@ -408,7 +435,8 @@ impl Renderer {
                     resource: globals.palette.as_entire_binding(),
                 },
             ],
-        })
+        });
+        (bind, marked)
     }
 
     /// The outline post pass: hovered parts (the mask's outline bit) outlined into a second
@@ -424,9 +452,11 @@ impl Renderer {
         let device = &self.gpu.device;
         let out = texture(device, "outlined", w, h, pipeline::COLOR_FORMAT);
         let out_view = out.create_view(&Default::default());
-        let (mask_view, channel) = match &views.ids {
-            Some(ids) => (ids, 3u32),
-            None => (&views.second, 0u32),
+        let (mask_view, channel) = match (&views.ids, &views.second) {
+            (Some(ids), _) => (ids, 3u32),
+            (None, Some(mask)) => (mask, 0u32),
+            // No mask (a plain image): nothing is outlined, the pass only copies.
+            (None, None) => (&views.color, 0u32),
         };
         let uniform = OutlineUniform {
             color: rgba(options.outline_color),
@@ -476,16 +506,63 @@ impl Renderer {
     }
 }
 
-/// Encodes one batch of the main pass: clears the targets when `first`, else loads them.
+/// Where a patch's colour comes from.
+fn albedo_of(p: &GpuPatch) -> Albedo {
+    if p.layout.uvs != u32::MAX {
+        Albedo::Texture
+    } else if p.layout.colors != u32::MAX {
+        Albedo::Vertex
+    } else {
+        Albedo::Base
+    }
+}
+
+/// Encodes one batch of the main pass: clears the targets when `first`, else loads them. Each
+/// patch is one indexed draw from its own buffer, by the pipeline of its variant (in `Marked`
+/// mode, patches holding marked vertices resolve their nearest corners and the others do not)
+/// and albedo; its bind group is set only where the pipeline reads it.
+#[allow(clippy::too_many_arguments)]
 fn encode_batch(
+    device: &wgpu::Device,
     encoder: &mut wgpu::CommandEncoder,
     views: &TargetViews,
     options: &RenderOptions,
     first: bool,
-    pipeline: &wgpu::RenderPipeline,
+    pipelines: &pipeline::Pipelines,
+    mode: Mode,
     bind: &wgpu::BindGroup,
     patches: &[Arc<GpuPatch>],
+    marked: &[bool],
 ) {
+    let variant_of = |marked: bool| match mode {
+        Mode::Plain => Variant::Image,
+        Mode::Marked if marked => Variant::ImageMarked,
+        Mode::Marked => Variant::ImageUnmarked,
+        Mode::Buffers => Variant::Buffers,
+    };
+    // Each patch's pipeline, looked up before the pass records.
+    let chosen: Vec<(Variant, Albedo)> = patches
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            (
+                variant_of(marked.get(i).copied().unwrap_or(false)),
+                albedo_of(p),
+            )
+        })
+        .collect();
+    let mut used: Vec<(Variant, Albedo)> = chosen.clone();
+    used.sort_by_key(|&(v, a)| (v as u8, a as u8));
+    used.dedup();
+    let made: Vec<((Variant, Albedo), Arc<wgpu::RenderPipeline>)> = used
+        .into_iter()
+        .map(|k| (k, pipelines.main(device, k.0, k.1)))
+        .collect();
+    let pipeline_for = |k: (Variant, Albedo)| {
+        made.iter()
+            .find(|(key, _)| *key == k)
+            .map(|(_, p)| p.clone())
+    };
     let ops = |clear: wgpu::Color| wgpu::Operations {
         load: if first {
             wgpu::LoadOp::Clear(clear)
@@ -502,20 +579,20 @@ fn encode_batch(
         a: bg[3] as f64,
     };
     let no_id = NO_ID as f64;
-    let mut attachments = vec![
-        Some(wgpu::RenderPassColorAttachment {
-            view: &views.color,
-            depth_slice: None,
-            resolve_target: None,
-            ops: ops(clear_color),
-        }),
-        Some(wgpu::RenderPassColorAttachment {
-            view: &views.second,
+    let mut attachments = vec![Some(wgpu::RenderPassColorAttachment {
+        view: &views.color,
+        depth_slice: None,
+        resolve_target: None,
+        ops: ops(clear_color),
+    })];
+    if let Some(second) = &views.second {
+        attachments.push(Some(wgpu::RenderPassColorAttachment {
+            view: second,
             depth_slice: None,
             resolve_target: None,
             ops: ops(wgpu::Color::TRANSPARENT),
-        }),
-    ];
+        }));
+    }
     if let Some(ids) = &views.ids {
         attachments.push(Some(wgpu::RenderPassColorAttachment {
             view: ids,
@@ -546,14 +623,57 @@ fn encode_batch(
         }),
         ..Default::default()
     });
-    pass.set_pipeline(pipeline);
+    let mut current: Option<(Variant, Albedo)> = None;
+    let mut patch_bound = false;
     pass.set_bind_group(0, bind, &[]);
     for (i, p) in patches.iter().enumerate() {
-        if p.triangles == 0 {
+        if p.triangles == 0 || p.vertices == 0 {
             continue;
         }
-        pass.set_bind_group(1, &p.bind_group, &[]);
-        pass.draw(0..p.triangles * 3, i as u32..i as u32 + 1);
+        let key = chosen[i];
+        if current != Some(key) {
+            let Some(pipeline) = pipeline_for(key) else {
+                continue;
+            };
+            pass.set_pipeline(&pipeline);
+            current = Some(key);
+        }
+        let l = &p.layout;
+        let n = p.vertices as u64;
+        let at = |words: u32| words as u64 * 4;
+        let positions = p.buffer.slice(at(l.positions)..at(l.positions) + 12 * n);
+        // A pipeline that reads no patch data still needs a group 1: any patch's will do, and
+        // setting it once spares the rasteriser a state change per patch.
+        if key.0.reads_patch() || key.1 == Albedo::Texture || !patch_bound {
+            pass.set_bind_group(1, &p.bind_group, &[]);
+            patch_bound = true;
+        }
+        pass.set_vertex_buffer(0, positions);
+        pass.set_vertex_buffer(1, p.buffer.slice(at(l.normals)..at(l.normals) + 12 * n));
+        // Models without colours and patches without atlas read the positions there: the
+        // shader does not use them (its frame and draw flags say so).
+        pass.set_vertex_buffer(
+            2,
+            if l.colors != u32::MAX {
+                p.buffer.slice(at(l.colors)..at(l.colors) + 4 * n)
+            } else {
+                positions
+            },
+        );
+        pass.set_vertex_buffer(
+            3,
+            if l.uvs != u32::MAX {
+                p.buffer.slice(at(l.uvs)..at(l.uvs) + 4 * n)
+            } else {
+                positions
+            },
+        );
+        pass.set_index_buffer(
+            p.buffer
+                .slice(at(l.indices)..at(l.indices) + 12 * p.triangles as u64),
+            wgpu::IndexFormat::Uint32,
+        );
+        pass.draw_indexed(0..p.triangles * 3, 0, i as u32..i as u32 + 1);
     }
 }
 
@@ -603,7 +723,10 @@ fn record_reads(
     };
     let all = wgpu::TextureAspect::All;
     let color = outputs.color.then(|| add(color, 4, all));
-    let normal = outputs.normal.then(|| add(&targets.second, 4, all));
+    let normal = match (&targets.second, outputs.normal) {
+        (Some(t), true) => Some(add(t, 4, all)),
+        _ => None,
+    };
     let ids = match &targets.ids {
         Some(t) if outputs.ids || outputs.normal => Some(add(t, 16, all)),
         _ => None,
@@ -620,92 +743,47 @@ fn record_reads(
     }
 }
 
-/// The frame from the read-back words: colours as bytes, normals decoded (zero off the model),
-/// depth linear (`near / z`, ∞ off the model), ids split per channel.
-fn decode_frame(
-    reads: &Reads,
-    data: &[Vec<u32>],
-    outputs: Outputs,
-    near: f32,
-    w: u32,
-    h: u32,
-    stats: RenderStats,
-) -> Frame {
-    let n = (w as usize) * (h as usize);
-    let ids_words: Option<&Vec<u32>> = reads.ids.map(|i| &data[i]);
-    let covered = |i: usize| ids_words.is_none_or(|d| d[i * 4] != NO_NODE);
-    let color = reads
-        .color
-        .map(|i| data[i].iter().map(|v| v.to_le_bytes()).collect());
-    let normal = reads.normal.map(|i| {
-        (0..n)
-            .map(|p| {
-                if covered(p) {
-                    oct_decode(data[i][p])
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect()
-    });
-    let depth = reads.depth.map(|i| {
-        data[i]
-            .iter()
-            .map(|&bits| {
-                let z = f32::from_bits(bits);
-                if z > 0.0 { near / z } else { f32::INFINITY }
-            })
-            .collect()
-    });
-    let ids = match ids_words {
-        Some(d) if outputs.ids => {
-            let mut b = IdBuffer {
-                node: Vec::with_capacity(n),
-                vertex: Vec::with_capacity(n),
-                triangle: Vec::with_capacity(n),
-                highlight: Vec::with_capacity(n),
-            };
-            for px in d.chunks_exact(4) {
-                b.node.push(px[0]);
-                b.vertex.push(px[1]);
-                b.triangle.push(px[2]);
-                b.highlight.push(if px[0] == NO_NODE {
-                    0
-                } else {
-                    px[3] | COVERED_BIT
-                });
-            }
-            Some(b)
-        }
-        _ => None,
-    };
-    Frame {
-        width: w,
-        height: h,
-        color,
-        normal,
-        depth,
-        ids,
-        stats,
-    }
-}
-
 struct Readback {
     buffer: wgpu::Buffer,
     row: u32,
     bpp: u32,
 }
 
-/// Maps the read-back buffers and returns each as tightly packed u32 words.
-fn read_all(
+/// The rows of a mapped read-back buffer.
+struct Rows<'a> {
+    bytes: &'a [u8],
+    pitch: usize,
+    width: usize,
+}
+
+impl Rows<'_> {
+    /// Row `y`'s bytes (`width` bytes, the padding to the copy alignment left out).
+    fn row(&self, y: usize) -> &[u8] {
+        &self.bytes[y * self.pitch..y * self.pitch + self.width]
+    }
+}
+
+fn word(b: &[u8], k: usize) -> u32 {
+    u32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]])
+}
+
+/// Maps the read-back buffers once the GPU is done and decodes the frame straight from their
+/// rows, rows in parallel: colours as bytes, normals decoded (zero off the model), depth
+/// linear (`near / z`, ∞ off the model), ids split per channel.
+#[allow(clippy::too_many_arguments)]
+fn read_frame(
     device: &wgpu::Device,
-    reads: &[Readback],
+    reads: &Reads,
     index: wgpu::SubmissionIndex,
+    outputs: Outputs,
+    near: f32,
     w: u32,
     h: u32,
-) -> Result<Vec<Vec<u32>>, RenderError> {
+    mut stats: RenderStats,
+) -> Result<Frame, RenderError> {
+    let t = Instant::now();
     let (tx, rx) = std::sync::mpsc::channel();
-    for (i, r) in reads.iter().enumerate() {
+    for (i, r) in reads.buffers.iter().enumerate() {
         let tx = tx.clone();
         r.buffer
             .slice(..)
@@ -719,8 +797,10 @@ fn read_all(
             timeout: Some(GPU_TIMEOUT),
         })
         .map_err(|e| RenderError::Gpu(e.to_string()))?;
+    stats.profile.gpu_ms += ms(t);
+    let t = Instant::now();
     let deadline = Instant::now() + GPU_TIMEOUT;
-    for _ in 0..reads.len() {
+    for _ in 0..reads.buffers.len() {
         loop {
             match rx.recv_timeout(Duration::from_millis(50)) {
                 Ok((_, Ok(()))) => break,
@@ -734,27 +814,118 @@ fn read_all(
             }
         }
     }
-    let mut out = Vec::with_capacity(reads.len());
-    for r in reads {
-        let view = r
-            .buffer
-            .get_mapped_range(..)
-            .map_err(|e| RenderError::Gpu(format!("read-back mapping: {e}")))?;
-        let row_bytes = (w * r.bpp) as usize;
-        let mut words = Vec::with_capacity(row_bytes / 4 * h as usize);
-        for y in 0..h as usize {
-            let start = y * r.row as usize;
-            words.extend(
-                view[start..start + row_bytes]
-                    .chunks_exact(4)
-                    .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
-            );
-        }
-        drop(view);
-        r.buffer.unmap();
-        out.push(words);
+    let mut views = Vec::with_capacity(reads.buffers.len());
+    for r in &reads.buffers {
+        views.push(
+            r.buffer
+                .get_mapped_range(..)
+                .map_err(|e| RenderError::Gpu(format!("read-back mapping: {e}")))?,
+        );
     }
-    Ok(out)
+    let (wu, hu) = (w as usize, h as usize);
+    let rows = |i: usize| Rows {
+        bytes: &views[i],
+        pitch: reads.buffers[i].row as usize,
+        width: wu * reads.buffers[i].bpp as usize,
+    };
+    let n = wu * hu;
+    let ids_rows = reads.ids.map(rows);
+    let covered = |y: usize, x: usize| {
+        ids_rows
+            .as_ref()
+            .is_none_or(|r| word(r.row(y), 4 * x) != NO_NODE)
+    };
+    let color = reads.color.map(|i| {
+        let r = rows(i);
+        let mut out = vec![[0u8; 4]; n];
+        out.par_chunks_mut(wu).enumerate().for_each(|(y, line)| {
+            for (x, px) in r.row(y).chunks_exact(4).enumerate() {
+                line[x] = [px[0], px[1], px[2], px[3]];
+            }
+        });
+        out
+    });
+    let normal = reads.normal.map(|i| {
+        let r = rows(i);
+        let mut out = vec![[0f32; 3]; n];
+        out.par_chunks_mut(wu).enumerate().for_each(|(y, line)| {
+            let src = r.row(y);
+            for (x, n) in line.iter_mut().enumerate() {
+                if covered(y, x) {
+                    *n = oct_decode(word(src, x));
+                }
+            }
+        });
+        out
+    });
+    let depth = reads.depth.map(|i| {
+        let r = rows(i);
+        let mut out = vec![0f32; n];
+        out.par_chunks_mut(wu).enumerate().for_each(|(y, line)| {
+            let src = r.row(y);
+            for (x, d) in line.iter_mut().enumerate() {
+                let z = f32::from_bits(word(src, x));
+                *d = if z > 0.0 { near / z } else { f32::INFINITY };
+            }
+        });
+        out
+    });
+    let ids = match &ids_rows {
+        Some(r) if outputs.ids => {
+            let mut b = IdBuffer {
+                node: vec![0; n],
+                vertex: vec![0; n],
+                triangle: vec![0; n],
+                highlight: vec![0; n],
+            };
+            b.node
+                .par_chunks_mut(wu)
+                .zip(b.vertex.par_chunks_mut(wu))
+                .zip(b.triangle.par_chunks_mut(wu))
+                .zip(b.highlight.par_chunks_mut(wu))
+                .enumerate()
+                .for_each(|(y, (((node, vertex), triangle), highlight))| {
+                    let src = r.row(y);
+                    for x in 0..wu {
+                        let id = word(src, 4 * x);
+                        node[x] = id;
+                        vertex[x] = word(src, 4 * x + 1);
+                        triangle[x] = word(src, 4 * x + 2);
+                        highlight[x] = if id == NO_NODE {
+                            0
+                        } else {
+                            word(src, 4 * x + 3) | COVERED_BIT
+                        };
+                    }
+                });
+            Some(b)
+        }
+        _ => None,
+    };
+    stats.profile.read_bytes = reads
+        .buffers
+        .iter()
+        .map(|r| (w * r.bpp) as u64 * h as u64)
+        .sum();
+    drop(views);
+    for r in &reads.buffers {
+        r.buffer.unmap();
+    }
+    stats.profile.read_ms = ms(t);
+    Ok(Frame {
+        width: w,
+        height: h,
+        color,
+        normal,
+        depth,
+        ids,
+        stats,
+    })
+}
+
+/// Milliseconds since `t`.
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
 }
 
 #[cfg(test)]

@@ -280,6 +280,26 @@ pub struct RenderStats {
     pub draw_ms: f64,
     pub total_ms: f64,
     pub cache: CacheStats,
+    /// Where the draw time went.
+    pub profile: FrameProfile,
+}
+
+/// Where a frame's time went (milliseconds), pass by pass, for the render bench's profile.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct FrameProfile {
+    /// Creating the render targets and the frame's uniforms.
+    pub targets_ms: f64,
+    /// Recording the passes (draw records, masks, bind groups, commands).
+    pub encode_ms: f64,
+    /// Submitting them (a software adapter may do part of the drawing here: it transforms
+    /// vertices on the submitting thread).
+    pub submit_ms: f64,
+    /// Waiting for the GPU to finish drawing (and copying into the read-back buffers).
+    pub gpu_ms: f64,
+    /// Mapping the read-back buffers and decoding the frame's buffers from them.
+    pub read_ms: f64,
+    /// Bytes read back.
+    pub read_bytes: u64,
 }
 
 /// A rendered frame; buffers not asked for are `None`. Row-major, top row first.

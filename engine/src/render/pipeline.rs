@@ -1,9 +1,16 @@
 //! Render pipelines of the headless renderer (system paper §3.3 drawing; §4.1.1/§4.1.2 the
 //! normal, depth and index images selection runs on; §2.2 the bold outline of a hovered part).
 //!
-//! Two variants of the main pass share one vertex shader: `image` (colour + highlight mask) for
-//! pictures, `buffers` (colour, packed normal, ids) for selection. Depth is a `Depth32Float`
-//! attachment with reversed Z (cleared to 0, test `Greater`), read back as linear view depth.
+//! The main pass has one pipeline per [`Variant`] (what it writes) and [`Albedo`] (where the
+//! patch's colour comes from), made on first use: `image` (colour alone) for pictures,
+//! `image_marked` / `image_unmarked` (colour + highlight mask, on patches with and without
+//! marked vertices) for pictures with parts, `buffers` (colour, packed normal, ids) for
+//! selection; all share one vertex shader (indexed, from the patch's buffer). Depth is a
+//! `Depth32Float` attachment with reversed Z (cleared to 0, test `Greater`), read back as linear
+//! view depth.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use wgpu::util::DeviceExt;
 use wgpu::{
@@ -31,10 +38,76 @@ pub struct Pipelines {
     /// A white texel, bound for patches without atlas.
     pub no_atlas: wgpu::TextureView,
     pub outline_layout: BindGroupLayout,
-    pub image: RenderPipeline,
-    pub buffers: RenderPipeline,
     pub outline: RenderPipeline,
+    main_layout: wgpu::PipelineLayout,
+    render_module: wgpu::ShaderModule,
+    main: Mutex<HashMap<(Variant, Albedo), Arc<RenderPipeline>>>,
 }
+
+/// What a main-pass pipeline writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Variant {
+    /// Colour alone.
+    Image,
+    /// Colour and mask, on patches holding marked vertices (nearest corner resolved).
+    ImageMarked,
+    /// Colour and mask ("covered"), on patches holding none.
+    ImageUnmarked,
+    /// Colour, packed normal and ids (nearest corner resolved).
+    Buffers,
+}
+
+impl Variant {
+    fn entry(self) -> &'static str {
+        match self {
+            Variant::Image => "fs_image",
+            Variant::ImageMarked => "fs_image_marked",
+            Variant::ImageUnmarked => "fs_image_unmarked",
+            Variant::Buffers => "fs_buffers",
+        }
+    }
+
+    /// Whether its fragment shader reads the patch's buffer (and so needs its bind group).
+    pub fn reads_patch(self) -> bool {
+        matches!(self, Variant::ImageMarked | Variant::Buffers)
+    }
+}
+
+/// Where a patch's colour comes from (`ALBEDO` in `render.wgsl`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Albedo {
+    /// The frame's base colour (a model without colours).
+    Base = 0,
+    /// Its vertex colours.
+    Vertex = 1,
+    /// Its texture atlas.
+    Texture = 2,
+}
+
+/// The vertex buffers of a patch's draw: positions and normals (f32 × 3), colours (RGBA8) and
+/// texture coordinates (unorm16 × 2), each a slice of the patch's buffer.
+const VERTEX_BUFFERS: [Option<wgpu::VertexBufferLayout<'static>>; 4] = [
+    Some(wgpu::VertexBufferLayout {
+        array_stride: 12,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+    }),
+    Some(wgpu::VertexBufferLayout {
+        array_stride: 12,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![1 => Float32x3],
+    }),
+    Some(wgpu::VertexBufferLayout {
+        array_stride: 4,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![2 => Unorm8x4],
+    }),
+    Some(wgpu::VertexBufferLayout {
+        array_stride: 4,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &wgpu::vertex_attr_array![3 => Unorm16x2],
+    }),
+];
 
 fn storage(binding: u32, visibility: ShaderStages) -> BindGroupLayoutEntry {
     BindGroupLayoutEntry {
@@ -119,15 +192,15 @@ impl Pipelines {
             label: Some("frame"),
             entries: &[
                 uniform(0, vf),
-                storage(1, ShaderStages::VERTEX),
-                storage(2, ShaderStages::VERTEX),
+                storage(1, vf),
+                storage(2, ShaderStages::FRAGMENT),
                 uniform(3, ShaderStages::FRAGMENT),
             ],
         });
         let patch_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("patch"),
             entries: &[
-                storage(0, ShaderStages::VERTEX),
+                storage(0, ShaderStages::FRAGMENT),
                 texture(1, wgpu::TextureSampleType::Float { filterable: true }),
                 BindGroupLayoutEntry {
                     binding: 2,
@@ -168,55 +241,7 @@ impl Pipelines {
             bind_group_layouts: &[Some(&frame_layout), Some(&patch_layout)],
             immediate_size: 0,
         });
-        let main = |label: &str, entry: &str, targets: &[Option<ColorTargetState>]| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&main_layout),
-                vertex: wgpu::VertexState {
-                    module: &render_module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    front_face: wgpu::FrontFace::Ccw,
-                    // Scans are not reliably oriented; back faces are shaded two-sided.
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &render_module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
-        let image = main(
-            "image",
-            "fs_image",
-            &[target(COLOR_FORMAT), target(MASK_FORMAT)],
-        );
-        let buffers = main(
-            "buffers",
-            "fs_buffers",
-            &[
-                target(COLOR_FORMAT),
-                target(NORMAL_FORMAT),
-                target(IDS_FORMAT),
-            ],
-        );
+
         let post_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("outline"),
             bind_group_layouts: &[Some(&outline_layout)],
@@ -249,9 +274,72 @@ impl Pipelines {
             atlas_sampler,
             no_atlas,
             outline_layout,
-            image,
-            buffers,
             outline,
+            main_layout,
+            render_module,
+            main: Mutex::new(HashMap::new()),
         }
+    }
+
+    /// The main-pass pipeline of `variant` and `albedo` (made on first use: a software
+    /// adapter compiles each in tens of milliseconds).
+    pub fn main(&self, device: &Device, variant: Variant, albedo: Albedo) -> Arc<RenderPipeline> {
+        let mut cache = self.main.lock().unwrap_or_else(|e| e.into_inner());
+        cache
+            .entry((variant, albedo))
+            .or_insert_with(|| Arc::new(self.make_main(device, variant, albedo)))
+            .clone()
+    }
+
+    fn make_main(&self, device: &Device, variant: Variant, albedo: Albedo) -> RenderPipeline {
+        let targets: &[Option<ColorTargetState>] = match variant {
+            Variant::Image => &[target(COLOR_FORMAT)],
+            Variant::ImageMarked | Variant::ImageUnmarked => {
+                &[target(COLOR_FORMAT), target(MASK_FORMAT)]
+            }
+            Variant::Buffers => &[
+                target(COLOR_FORMAT),
+                target(NORMAL_FORMAT),
+                target(IDS_FORMAT),
+            ],
+        };
+        let constants = [("ALBEDO", albedo as u32 as f64)];
+        let options = wgpu::PipelineCompilationOptions {
+            constants: &constants,
+            ..Default::default()
+        };
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(variant.entry()),
+            layout: Some(&self.main_layout),
+            vertex: wgpu::VertexState {
+                module: &self.render_module,
+                entry_point: Some("vs_main"),
+                compilation_options: options.clone(),
+                buffers: &VERTEX_BUFFERS,
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                front_face: wgpu::FrontFace::Ccw,
+                // Scans are not reliably oriented; back faces are shaded two-sided.
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &self.render_module,
+                entry_point: Some(variant.entry()),
+                compilation_options: options,
+                targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
     }
 }

@@ -51,8 +51,10 @@ pub struct ViewSelection {
     pub cut: Option<CutStats>,
     /// Rendering the buffers, milliseconds.
     pub render_ms: f64,
-    /// Selecting the pixels, milliseconds.
+    /// Selecting the pixels, milliseconds (seeds, graph and max-flow together, or the click).
     pub cut_ms: f64,
+    /// Of `cut_ms`: placing the seeds, milliseconds (0 for a click).
+    pub seeds_ms: f64,
 }
 
 /// Why a selection on a view failed.
@@ -107,6 +109,7 @@ pub fn select_on_view(
                 cut: None,
                 render_ms,
                 cut_ms: t.elapsed().as_secs_f64() * 1e3,
+                seeds_ms: 0.0,
             })
         }
         Input::Strokes { tool, mask, params } => {
@@ -129,6 +132,7 @@ pub fn select_on_view(
                 picked: None,
                 render_ms,
                 cut_ms,
+                seeds_ms: sel.seeds_ms,
             })
         }
     }

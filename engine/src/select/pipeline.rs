@@ -42,6 +42,8 @@ pub struct PixelSelection {
     pub count: usize,
     /// The cut, for the tools that make one.
     pub cut: Option<CutStats>,
+    /// Placing the seeds (the lasso's fill, the strokes' hard constraints), milliseconds.
+    pub seeds_ms: f64,
 }
 
 /// Runs `tool` on the strokes of `mask` over the rendered `buffers`. `color_cue`: whether the
@@ -67,17 +69,20 @@ pub fn select_pixels(
     if buffers.covered_count() == 0 {
         return Err(SelectError::NothingVisible);
     }
-    let (selected, cut) = match tool {
-        Tool::Lasso => (seeds::lasso(mask, buffers)?, None),
+    let started = std::time::Instant::now();
+    let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
+    let (selected, cut, seeds_ms) = match tool {
+        Tool::Lasso => (seeds::lasso(mask, buffers)?, None, ms(started)),
         Tool::Markup | Tool::HeavyLasso => {
             let s = if tool == Tool::Markup {
                 seeds::markup(mask, buffers)?
             } else {
                 seeds::heavy_lasso(mask, buffers)?
             };
+            let seeds_ms = ms(started);
             let (mut selected, stats) = graph_cut::graph_cut(buffers, &s, params, color_cue)?;
             graph_cut::keep_connected_to_seeds(&mut selected, &s);
-            (selected, Some(stats))
+            (selected, Some(stats), seeds_ms)
         }
     };
     let count = selected.iter().filter(|&&s| s).count();
@@ -87,6 +92,7 @@ pub fn select_pixels(
         selected,
         count,
         cut,
+        seeds_ms,
     })
 }
 

@@ -332,7 +332,8 @@ export class SceneView {
       this.material.uniformsNeedUpdate = true;
     }
     this.renderer.render(this.scene, this.camera);
-    if (outline) this.outline.render(this.scene, this.camera, outline);
+    // The outline costs two full-screen passes: only when a drawn patch holds a marked vertex.
+    if (outline && this.scene.children.some((m) => m.visible && m.userData.marked)) this.outline.render(this.scene, this.camera, outline);
   }
 
   /**

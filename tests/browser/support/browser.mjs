@@ -60,13 +60,22 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 /**
  * Polls `fn` in the page (page.evaluate, which the page's CSP allows, unlike string
- * predicates) until `accept(value)` holds in Node; returns the value.
+ * predicates) until `accept(value)` holds in Node; returns the value. A navigation of the
+ * page while polling is waited out, not an error.
  */
 export async function poll(page, fn, accept = Boolean, timeout = 60_000, arg = undefined) {
   const end = Date.now() + timeout;
   let value;
   for (;;) {
-    value = await page.evaluate(fn, arg);
+    try {
+      value = await page.evaluate(fn, arg);
+    } catch (err) {
+      // The page may navigate or reload itself (a model page does when its build ends):
+      // the evaluation is lost with the old document and asked again of the new one.
+      if (!/Execution context was destroyed|because of a navigation/i.test(String(err && err.message)) || Date.now() > end) throw err;
+      await sleep(100);
+      continue;
+    }
     if (accept(value)) return value;
     if (Date.now() > end) throw new Error(`timed out; last value ${JSON.stringify(value)?.slice(0, 400)}`);
     await sleep(100);

@@ -2,6 +2,9 @@
 //! orbiting and zooming in and out) at 1280×720 and a 1-pixel error threshold on the software
 //! adapter (system paper §3.3). Prints frame time (p50/p95), triangles and patches drawn,
 //! patches loaded, cache bytes and peak memory; a few frames of selection buffers are timed too.
+//! Every frame is also drawn by the bare-draw reference ([`bare`]: the same triangles, the
+//! smallest pipeline, the same targets read back) in the same run, and the ratio printed; the
+//! renderer's own profile says where its time goes (targets, encoding, GPU, read-back, decode).
 //!
 //! `MODEL` is a `.mwlod` file, a mesh file (its LOD is built into a temporary directory first),
 //! or `synth:N` for the generated relief of about N triangles (e.g. `synth:10000000`).
@@ -18,8 +21,11 @@ use meshwiki_engine::mesh::{ImportStats, synth};
 use meshwiki_engine::progress::NoProgress;
 use meshwiki_engine::render::encode::{self, ImageFormat};
 use meshwiki_engine::render::{
-    AdapterChoice, Cut, Outputs, RenderModel, RenderOptions, Renderer, RendererOptions,
+    AdapterChoice, Cut, FrameProfile, GpuDevice, NO_NODE, Outputs, RenderModel, RenderOptions,
+    Renderer, RendererOptions,
 };
+
+mod bare;
 
 const FRAMES: usize = 60;
 const WIDTH: u32 = 1280;
@@ -55,6 +61,21 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     }
     let i = ((sorted.len() - 1) as f64 * p).round() as usize;
     sorted[i.min(sorted.len() - 1)]
+}
+
+/// Prints the mean of each stage of `profiles`.
+fn print_profile(label: &str, profiles: &[FrameProfile]) {
+    let n = profiles.len().max(1) as f64;
+    let mean = |f: fn(&FrameProfile) -> f64| profiles.iter().map(f).sum::<f64>() / n;
+    println!(
+        "{label}: targets {:.1} ms, encode {:.1} ms, submit {:.1} ms, GPU {:.1} ms, read-back and decode {:.1} ms ({:.1} MB)",
+        mean(|p| p.targets_ms),
+        mean(|p| p.encode_ms),
+        mean(|p| p.submit_ms),
+        mean(|p| p.gpu_ms),
+        mean(|p| p.read_ms),
+        mean(|p| p.read_bytes as f64) / 1e6,
+    );
 }
 
 /// Opens `model`, building its LOD file first when it is a mesh or `synth:N`.
@@ -181,8 +202,9 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
             .context("MESHWIKI_RENDER_CACHE")?
             .max(1 << 20);
     }
-    let renderer = Renderer::open(AdapterChoice::Software, settings)
-        .context("opening the software adapter")?;
+    let gpu = GpuDevice::new(AdapterChoice::Software).context("opening the software adapter")?;
+    let renderer = Renderer::new(gpu.clone(), settings);
+    let mut reference = bare::Bare::new(gpu).context("the bare-draw reference")?;
     let lod = model.lod();
     let h = lod.header();
     println!("device: {}", renderer.device().describe());
@@ -208,6 +230,8 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
         ..RenderOptions::default()
     };
     let mut times = Vec::with_capacity(FRAMES);
+    let mut bare_times = Vec::with_capacity(FRAMES);
+    let mut profiles = Vec::with_capacity(FRAMES);
     let (mut tris, mut nodes, mut loaded, mut max_loaded) =
         (Vec::new(), Vec::new(), 0usize, 0usize);
     let mut max_cache = 0u64;
@@ -219,6 +243,17 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
             .render(&model, cam, &options, &[])
             .with_context(|| format!("frame {i}"))?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
+        profiles.push(frame.stats.profile);
+        // The same cut by the bare reference (its patches uploaded first, untimed: the
+        // renderer's cache is warm after its first frames too).
+        let cut_nodes = renderer.cut_nodes(&model, cam, &options.cut)?;
+        reference.load(&model, &cut_nodes)?;
+        bare_times.push(
+            reference
+                .frame(&cut_nodes, cam, frame.stats.near, false)?
+                .as_secs_f64()
+                * 1e3,
+        );
         cut_ms += frame.stats.cut_ms;
         load_ms += frame.stats.load_ms;
         draw_ms += frame.stats.draw_ms;
@@ -247,14 +282,33 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
         ..options.clone()
     };
     let mut buffer_times = Vec::new();
+    let mut bare_buffer_times = Vec::new();
+    let mut buffer_profiles = Vec::new();
+    let (mut covered, mut covered_tris) = (0u64, 0u64);
     for cam in cams.iter().step_by(FRAMES / BUFFER_FRAMES) {
         let t = Instant::now();
-        renderer
+        let frame = renderer
             .render(&model, cam, &buffers, &[])
             .context("buffers frame")?;
         buffer_times.push(t.elapsed().as_secs_f64() * 1e3);
+        buffer_profiles.push(frame.stats.profile);
+        if let Some(ids) = &frame.ids {
+            covered += ids.node.iter().filter(|&&n| n != NO_NODE).count() as u64;
+            covered_tris += frame.stats.triangles;
+        }
+        let cut_nodes = renderer.cut_nodes(&model, cam, &buffers.cut)?;
+        reference.load(&model, &cut_nodes)?;
+        bare_buffer_times.push(
+            reference
+                .frame(&cut_nodes, cam, frame.stats.near, true)?
+                .as_secs_f64()
+                * 1e3,
+        );
     }
     buffer_times.sort_by(f64::total_cmp);
+    bare_buffer_times.sort_by(f64::total_cmp);
+    let mut bare_sorted = bare_times.clone();
+    bare_sorted.sort_by(f64::total_cmp);
     let cache = renderer.cache_stats();
     let peak = lod::peak_rss_bytes();
 
@@ -273,6 +327,13 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
         cut_ms / FRAMES as f64,
         load_ms / FRAMES as f64,
         draw_ms / FRAMES as f64
+    );
+    print_profile("  profile (means)", &profiles);
+    let ratio = percentile(&sorted, 0.5) / percentile(&bare_sorted, 0.5).max(1e-9);
+    println!(
+        "bare-draw reference (same cut, positions only, one colour, colour read back): p50 {:.1} ms, p95 {:.1} ms; meshwiki / bare = {ratio:.2}x (p50)",
+        percentile(&bare_sorted, 0.5),
+        percentile(&bare_sorted, 0.95),
     );
     println!(
         "triangles drawn: mean {:.0}, max {} ({:.1}% of the input at most); patches drawn: mean {mean_nodes:.0}, max {}",
@@ -298,6 +359,16 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
         percentile(&buffer_times, 0.5),
         percentile(&buffer_times, 0.95),
         buffer_times.len()
+    );
+    print_profile("  profile (means)", &buffer_profiles);
+    println!(
+        "  bare-draw reference (colour + node/primitive ids, both read back): p50 {:.1} ms; meshwiki / bare = {:.2}x (p50)",
+        percentile(&bare_buffer_times, 0.5),
+        percentile(&buffer_times, 0.5) / percentile(&bare_buffer_times, 0.5).max(1e-9)
+    );
+    println!(
+        "  triangles per covered pixel: {:.2} ({covered_tris} triangles over {covered} covered pixels)",
+        covered_tris as f64 / covered.max(1) as f64
     );
     match (peak, rss_before) {
         (Some(p), Some(b)) => println!(
