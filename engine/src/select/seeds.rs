@@ -77,20 +77,114 @@ const CREASE_COST: f32 = 120.0;
 /// crease spreads its turn over several pixels, each of which changes little.
 const CREASE_SCALE: usize = 4;
 
-/// Geodesic distance from the pixels `sources` over the covered 8-connected pixel graph
-/// (multi-source Dijkstra). A step costs its length in pixels (1 or √2) times
-/// `1 + CREASE_COST · c`, where `c = max(1 − g(E), 1 − g(D_ij))` is how much of a geometric
-/// edge lies between the two pixels: `E` is the larger normal change across either pixel
-/// measured at [`CREASE_SCALE`] pixels ([`normal_edges`]), `D_ij` their relative depth
-/// difference, and `g(x) = exp(−β x²)` with the contrast normalisation of the smoothness term
-/// (eq. 4, [`super::energy::Smoothness`]), so a crease is measured against the view's own
-/// typical change. Pixels not reachable are `INFINITY`.
-pub fn geodesic_from(buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
-    use super::energy::{EnergyParams, Smoothness, differences};
-    let (w, h) = (buffers.width as usize, buffers.height as usize);
-    let smooth = Smoothness::estimate(buffers, &EnergyParams::default(), false);
-    let edge = normal_edges(buffers, CREASE_SCALE);
-    let mut dist = vec![f32::INFINITY; w * h];
+/// Offsets `(dx, dy)` of the four "forward" neighbours whose step costs a pixel holds in
+/// [`StepCosts`]: right, down-left, down, down-right. The other four neighbours' steps are the
+/// forward steps of those neighbours (every cost is symmetric).
+const FORWARD: [(isize, isize); 4] = [(1, 0), (-1, 1), (0, 1), (1, 1)];
+
+/// The cost of every step of the covered 8-connected pixel graph for the stroke distance,
+/// computed once per view and shared by the foreground and background searches. A step
+/// costs its length in pixels (1 or √2) times `1 + CREASE_COST · c`, where
+/// `c = max(1 − g(E), 1 − g(D_ij))` is how much of a geometric edge lies between the two
+/// pixels: `E` is the larger normal change across either pixel measured at [`CREASE_SCALE`]
+/// pixels ([`normal_edges`]), `D_ij` their relative depth difference, and `g(x) = exp(−β x²)`
+/// with the contrast normalisation of the smoothness term (eq. 4,
+/// [`super::energy::Smoothness`]), so a crease is measured against the view's own typical
+/// change. Steps to or from an uncovered pixel are `INFINITY`.
+pub struct StepCosts {
+    width: usize,
+    height: usize,
+    /// Per pixel, the cost of its [`FORWARD`] steps.
+    forward: Vec<[f32; 4]>,
+}
+
+impl StepCosts {
+    pub fn new(buffers: &Buffers<'_>) -> StepCosts {
+        use super::energy::{EnergyParams, Smoothness, differences};
+        let (w, h) = (buffers.width as usize, buffers.height as usize);
+        let smooth = Smoothness::estimate(buffers, &EnergyParams::default(), false);
+        let edge = normal_edges(buffers, CREASE_SCALE);
+        // Normal change between the two pixels where no scaled edge map, and depth.
+        let cues = if edge.is_some() { 2..3 } else { 1..3 };
+        let cost = |i: usize, j: usize, length: f32| {
+            let diff = differences(buffers, i, j);
+            let mut crease = 0.0f32;
+            if let Some((e, beta)) = &edge {
+                let x = e[i].max(e[j]);
+                crease = 1.0 - (-beta * x * x).exp();
+            }
+            for ((&weight, &beta), &x) in smooth.weight[cues.clone()]
+                .iter()
+                .zip(&smooth.beta[cues.clone()])
+                .zip(&diff[cues.clone()])
+            {
+                if weight > 0.0 {
+                    crease = crease.max(1.0 - (-beta * x * x).exp());
+                }
+            }
+            length * (1.0 + CREASE_COST * crease)
+        };
+        let mut forward = vec![[f32::INFINITY; 4]; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if !buffers.covered(i) {
+                    continue;
+                }
+                for (k, &(dx, dy)) in FORWARD.iter().enumerate() {
+                    let (nx, ny) = (x as isize + dx, y as isize + dy);
+                    if nx < 0 || nx as usize >= w || ny as usize >= h {
+                        continue;
+                    }
+                    let j = ny as usize * w + nx as usize;
+                    if buffers.covered(j) {
+                        let length = if dx != 0 && dy != 0 {
+                            std::f32::consts::SQRT_2
+                        } else {
+                            1.0
+                        };
+                        forward[i][k] = cost(i, j, length);
+                    }
+                }
+            }
+        }
+        StepCosts {
+            width: w,
+            height: h,
+            forward,
+        }
+    }
+
+    /// The eight steps out of pixel `i`: `(neighbour, cost)`, uncovered ones left out.
+    fn steps(&self, i: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
+        let (w, h) = (self.width, self.height);
+        let (x, y) = ((i % w) as isize, (i / w) as isize);
+        // Forward steps are held by `i`, backward ones by the neighbour they lead to.
+        let own = FORWARD
+            .iter()
+            .enumerate()
+            .map(move |(k, &(dx, dy))| (dx, dy, i, k));
+        let theirs = FORWARD
+            .iter()
+            .enumerate()
+            .map(move |(k, &(dx, dy))| (-dx, -dy, usize::MAX, k));
+        own.chain(theirs).filter_map(move |(dx, dy, holder, k)| {
+            let (nx, ny) = (x + dx, y + dy);
+            if nx < 0 || ny < 0 || nx as usize >= w || ny as usize >= h {
+                return None;
+            }
+            let j = ny as usize * w + nx as usize;
+            let c = self.forward[if holder == usize::MAX { j } else { holder }][k];
+            c.is_finite().then_some((j, c))
+        })
+    }
+}
+
+/// Geodesic distance from the pixels `sources` over the covered 8-connected pixel graph with
+/// the step costs of [`StepCosts`] (multi-source Dijkstra). Pixels not reachable (or not
+/// covered) are `INFINITY`.
+pub fn geodesic_from(costs: &StepCosts, buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
+    let mut dist = vec![f32::INFINITY; costs.width * costs.height];
     // Non-negative f32 distances order like their bit patterns.
     let mut heap: BinaryHeap<Reverse<(u32, u32)>> = BinaryHeap::new();
     for &s in sources {
@@ -106,34 +200,8 @@ pub fn geodesic_from(buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
         if d > dist[i] {
             continue;
         }
-        for j in neighbours8(i, w, h) {
-            if !buffers.covered(j) {
-                continue;
-            }
-            let diagonal = (j % w != i % w) && (j / w != i / w);
-            let diff = differences(buffers, i, j);
-            let mut crease = 0.0f32;
-            if let Some((e, beta)) = &edge {
-                let x = e[i].max(e[j]);
-                crease = 1.0 - (-beta * x * x).exp();
-            }
-            // Normal change between the two pixels where no scaled edge map, and depth.
-            let cues = if edge.is_some() { 2..3 } else { 1..3 };
-            for ((&weight, &beta), &x) in smooth.weight[cues.clone()]
-                .iter()
-                .zip(&smooth.beta[cues.clone()])
-                .zip(&diff[cues])
-            {
-                if weight > 0.0 {
-                    crease = crease.max(1.0 - (-beta * x * x).exp());
-                }
-            }
-            let step = if diagonal {
-                std::f32::consts::SQRT_2
-            } else {
-                1.0
-            };
-            let nd = d + step * (1.0 + CREASE_COST * crease);
+        for (j, step) in costs.steps(i) {
+            let nd = d + step;
             if nd < dist[j] {
                 dist[j] = nd;
                 heap.push(Reverse((nd.to_bits(), j as u32)));
@@ -246,10 +314,15 @@ pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectE
         width: buffers.width,
         height: buffers.height,
         role,
-        stroke_position: Some(relative_distance(
-            &geodesic_from(buffers, &fg),
-            &geodesic_from(buffers, &bg),
-        )),
+        stroke_position: Some({
+            let costs = StepCosts::new(buffers);
+            // The two searches are independent: one per core.
+            let (d_fg, d_bg) = rayon::join(
+                || geodesic_from(&costs, buffers, &fg),
+                || geodesic_from(&costs, buffers, &bg),
+            );
+            relative_distance(&d_fg, &d_bg)
+        }),
         fg_samples: fg,
         bg_samples: bg,
         band_position: None,
