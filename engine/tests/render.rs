@@ -413,6 +413,100 @@ fn id_buffer_is_exact_and_matches_ray_casts() {
     }
 }
 
+/// A window of the view (the selection tools draw only their strokes' box) holds the whole
+/// view's pixels: the same ids, depth and normals, placed at its origin; the rest of the view
+/// embeds as background. Patches wholly outside the window are not drawn.
+#[test]
+fn a_window_of_the_view_holds_the_whole_views_pixels() {
+    let Some(r) = renderer() else { return };
+    let m = relief();
+    let (w, h) = (256u32, 192u32);
+    let cam = oblique(w, h);
+    let cut = Cut::View {
+        pixel_error: 1.0,
+        culling: Culling::ALL,
+    };
+    let whole = r
+        .render(&m.model, &cam, &options(Outputs::ALL, cut.clone()), &[])
+        .expect("render");
+    let wi = whole.ids.as_ref().expect("ids");
+    let wd = whole.depth.as_ref().expect("depth");
+    let wn = whole.normal.as_ref().expect("normal");
+    for window in [
+        [37u32, 21u32, 90u32, 61u32],
+        [0, 0, 1, 1],
+        [200, 150, 56, 42],
+        [120, 90, 9, 9],
+    ] {
+        let [x0, y0, ww, wh] = window;
+        let o = RenderOptions {
+            window: Some(window),
+            ..options(Outputs::ALL, cut.clone())
+        };
+        let part = r.render(&m.model, &cam, &o, &[]).expect("render window");
+        assert_eq!((part.width, part.height, part.origin), (ww, wh, [x0, y0]));
+        assert!(part.stats.nodes <= whole.stats.nodes);
+        let embedded = part.clone().embed(w, h);
+        let (ei, ed) = (
+            embedded.ids.as_ref().expect("ids"),
+            embedded.depth.as_ref().expect("depth"),
+        );
+        let (mut covered, mut same_ids, mut depth_ok, mut normal_ok) = (0, 0, 0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                let inside = (x0..x0 + ww).contains(&x) && (y0..y0 + wh).contains(&y);
+                if !inside {
+                    assert_eq!(
+                        ei.node[i], NO_NODE,
+                        "background outside the window at {x},{y}"
+                    );
+                    assert!(ed[i].is_infinite());
+                    continue;
+                }
+                let j = ((y - y0) * ww + (x - x0)) as usize;
+                let pi = part.ids.as_ref().expect("ids");
+                assert_eq!(ei.node[i], pi.node[j], "embedding keeps the pixel");
+                if wi.node[i] == NO_NODE && pi.node[j] == NO_NODE {
+                    continue;
+                }
+                covered += 1;
+                same_ids += (wi.node[i] == pi.node[j]
+                    && wi.vertex[i] == pi.vertex[j]
+                    && wi.triangle[i] == pi.triangle[j]) as usize;
+                let pd = part.depth.as_ref().expect("depth")[j];
+                depth_ok += ((pd - wd[i]).abs() <= 1e-4 * wd[i]) as usize;
+                let pn = Vec3::from(part.normal.as_ref().expect("normal")[j]);
+                normal_ok += (pn.dot(Vec3::from(wn[i])) > 0.999) as usize;
+            }
+        }
+        eprintln!(
+            "window {window:?}: {covered} covered, ids equal {same_ids}, depth {depth_ok}, normals {normal_ok}; {} of {} patches drawn",
+            part.stats.nodes, whole.stats.nodes
+        );
+        // An off-centre crop of the same projection samples the same points up to rounding:
+        // a pixel centre lying on a triangle edge may go either way.
+        let at_least = |n: usize| n as f64 >= 0.99 * covered as f64 - 1.0;
+        assert!(at_least(same_ids) && at_least(depth_ok) && at_least(normal_ok));
+        if ww * wh >= 4000 {
+            assert!(covered > 1000, "the window shows the relief");
+            assert!(
+                part.stats.nodes < whole.stats.nodes,
+                "patches outside the window are not drawn"
+            );
+        }
+    }
+    // A window outside the view is refused.
+    let o = RenderOptions {
+        window: Some([250, 0, 10, 10]),
+        ..options(Outputs::ALL, cut)
+    };
+    assert!(matches!(
+        r.render(&m.model, &cam, &o, &[]),
+        Err(RenderError::BadOption(_))
+    ));
+}
+
 #[test]
 fn tints_are_exact_and_the_hovered_part_is_outlined() {
     let Some(r) = renderer() else { return };

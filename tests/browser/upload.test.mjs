@@ -15,7 +15,7 @@ import { join } from 'node:path';
 
 import { SHARED_MESHES } from './support/env.mjs';
 import { ADMIN, startServer } from './support/server.mjs';
-import { launch, login, poll, waitViewer } from './support/browser.mjs';
+import { gotoSettled, launch, login, poll, waitViewer } from './support/browser.mjs';
 
 let server;
 let browser;
@@ -165,7 +165,7 @@ test('a glTF with its buffer and texture uploads through the page, with progress
   await page.fill('input[name=title]', 'Uploaded mask');
   await page.setInputFiles('#scan-files', files);
   await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
-  const progress = await page.evaluate(() => ({ value: Number(sessionStorage.getItem('mw-progress')), statuses: JSON.parse(sessionStorage.getItem('mw-statuses') || '[]') }));
+  const progress = await poll(page, () => ({ value: Number(sessionStorage.getItem('mw-progress')), statuses: JSON.parse(sessionStorage.getItem('mw-statuses') || '[]') }), () => true);
   assert.equal(progress.value, 100, `the upload's progress reached 100 % (${JSON.stringify(progress)})`);
   assert.ok(progress.statuses.some((s) => /^Uploading: /.test(s)), `the progress was said in words: ${progress.statuses}`);
   assert.ok(progress.statuses.some((s) => /Connection lost.*resumes where it stopped/.test(s)), `the dropped connection was said: ${progress.statuses}`);
@@ -176,7 +176,7 @@ test('a glTF with its buffer and texture uploads through the page, with progress
   assert.equal(model.status, 'ready', model.error);
   const jobs = await server.api.get('/api/v1/jobs?limit=1');
   assert.match(jobs[0].source_name, /\.gltf$/);
-  await page.goto(`${server.base}/models/${id}`);
+  await gotoSettled(page, `${server.base}/models/${id}`);
   const stats = await waitViewer(page, (s) => s.triangles > 0);
   assert.ok(stats.triangles > 0, 'the viewer draws the uploaded scan');
   await page.close();
@@ -218,7 +218,8 @@ test('a .zip cut off after its first chunk resumes when picked again after a rel
   await page.fill('input[name=title]', 'Zipped grid');
   await page.setInputFiles('#scan-files', zipPath);
   await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
-  const statuses = await page.evaluate(() => JSON.parse(sessionStorage.getItem('mw-statuses') || '[]'));
+  // The model page may reload itself when the build ends: poll waits that out.
+  const statuses = await poll(page, () => JSON.parse(sessionStorage.getItem('mw-statuses') || '[]'), () => true);
   assert.ok(statuses.some((s) => /resumed at 8\.0 MB/.test(s)), `resumed, not started again: ${statuses}`);
   const id = Number(new URL(page.url()).pathname.split('/').pop());
   const model = await poll(page, async (mid) => (await fetch(`/api/v1/models/${mid}`)).json(), (m) => m.status === 'ready' || m.status === 'failed', 300_000, id);

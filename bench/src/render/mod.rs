@@ -5,6 +5,8 @@
 //! Every frame is also drawn by the bare-draw reference ([`bare`]: the same triangles, the
 //! smallest pipeline, the same targets read back) in the same run, and the ratio printed; the
 //! renderer's own profile says where its time goes (targets, encoding, GPU, read-back, decode).
+//! Then every selection tool runs on a few views of the path, its time printed per stage
+//! ([`select`]).
 //!
 //! `MODEL` is a `.mwlod` file, a mesh file (its LOD is built into a temporary directory first),
 //! or `synth:N` for the generated relief of about N triangles (e.g. `synth:10000000`).
@@ -26,6 +28,7 @@ use meshwiki_engine::render::{
 };
 
 mod bare;
+mod select;
 
 const FRAMES: usize = 60;
 const WIDTH: u32 = 1280;
@@ -370,6 +373,12 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
         "  triangles per covered pixel: {:.2} ({covered_tris} triangles over {covered} covered pixels)",
         covered_tris as f64 / covered.max(1) as f64
     );
+    let selection_cams: Vec<Camera> = cams
+        .iter()
+        .step_by(FRAMES / BUFFER_FRAMES)
+        .copied()
+        .collect();
+    select::run(&renderer, &model, &selection_cams)?;
     match (peak, rss_before) {
         (Some(p), Some(b)) => println!(
             "memory: peak RSS {:.0} MB{} (RSS before rendering {:.0} MB)",

@@ -108,6 +108,30 @@ fn projection(camera: &Camera, near: f32) -> Mat4 {
     )
 }
 
+/// The clip-space transform that makes the window `[x, y, width, height]` (pixels, y down) of
+/// `camera`'s view fill the targets: an off-centre crop of the same projection, so every pixel
+/// of the window samples where the whole view's pixel does.
+fn crop(camera: &Camera, [x, y, ww, wh]: [u32; 4]) -> Mat4 {
+    let (vw, vh) = (camera.width as f32, camera.height as f32);
+    let (x, y, ww, wh) = (x as f32, y as f32, ww as f32, wh as f32);
+    let (sx, sy) = (vw / ww, vh / wh);
+    let tx = (vw - 2.0 * x - ww) / ww;
+    let ty = (2.0 * y + wh - vh) / wh;
+    Mat4::from_cols(
+        Vec4::new(sx, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, sy, 0.0, 0.0),
+        Vec4::new(0.0, 0.0, 1.0, 0.0),
+        Vec4::new(tx, ty, 0.0, 1.0),
+    )
+}
+
+/// The four side planes (left, right, bottom, top) of a view-projection's frustum, `(n, d)`
+/// with `n·p + d >= 0` inside, `n` of unit length (Gribb and Hartmann's row sums).
+fn side_planes(m: &Mat4) -> [Vec4; 4] {
+    let (r0, r1, r3) = (m.row(0), m.row(1), m.row(3));
+    [r3 + r0, r3 - r0, r3 + r1, r3 - r1].map(|p| p / p.truncate().length().max(f32::MIN_POSITIVE))
+}
+
 fn rgba(c: [u8; 4]) -> [f32; 4] {
     c.map(|v| v as f32 / 255.0)
 }
@@ -197,7 +221,29 @@ impl Renderer {
     ) -> Result<Frame, RenderError> {
         let draw_start = Instant::now();
         let device = &self.gpu.device;
-        let (w, h) = (camera.width, camera.height);
+        let window = options
+            .window
+            .unwrap_or([0, 0, camera.width, camera.height]);
+        let (w, h) = (window[2], window[3]);
+        let view_proj = crop(camera, window) * projection(camera, near) * camera.view();
+        // Patches wholly outside the window draw nothing in it.
+        let inside: Vec<u32>;
+        let nodes = if options.window.is_some() {
+            let planes = side_planes(&view_proj);
+            let records = model.lod.nodes();
+            inside = nodes
+                .iter()
+                .copied()
+                .filter(|&n| {
+                    let b = records[n as usize].bounds;
+                    let c = Vec3::new(b[0], b[1], b[2]);
+                    planes.iter().all(|p| p.truncate().dot(c) + p.w >= -b[3])
+                })
+                .collect();
+            &inside[..]
+        } else {
+            nodes
+        };
         let outputs = options.outputs;
         let mode = if outputs.normal || outputs.ids {
             Mode::Buffers
@@ -210,7 +256,7 @@ impl Renderer {
         let t = Instant::now();
         let targets = Targets::new(device, w, h, mode);
         let views = targets.views();
-        let globals = self.globals(camera, options, prepared, near);
+        let globals = self.globals(camera, options, prepared, view_proj, [w, h]);
         stats.profile.targets_ms = ms(t);
         let (load_time, mut encoder, pinned) = self.main_pass(
             model, options, prepared, nodes, &views, &globals, mode, &mut stats,
@@ -229,6 +275,7 @@ impl Renderer {
         let index = self.gpu.queue.submit([commands]);
         stats.profile.submit_ms += ms(t);
         let mut frame = read_frame(device, &reads, index, outputs, near, w, h, stats)?;
+        frame.origin = [window[0], window[1]];
         drop(pinned);
         frame.stats.draw_ms = draw_start.elapsed().saturating_sub(load_time).as_secs_f64() * 1e3;
         Ok(frame)
@@ -241,15 +288,15 @@ impl Renderer {
         camera: &Camera,
         options: &RenderOptions,
         prepared: &Prepared<'_>,
-        near: f32,
+        view_proj: Mat4,
+        [w, h]: [u32; 2],
     ) -> Globals {
         let device = &self.gpu.device;
-        let (w, h) = (camera.width, camera.height);
         let light = [options.ambient, 1.0 - options.ambient, 0.0, 0.0];
         let basis = camera.basis();
         let scale = camera.pixel_scale();
         let frame_uniform = FrameUniform {
-            view_proj: (projection(camera, near) * camera.view()).to_cols_array_2d(),
+            view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).into(),
             light,
             base_color: rgba(options.base_color),
@@ -915,6 +962,7 @@ fn read_frame(
     Ok(Frame {
         width: w,
         height: h,
+        origin: [0, 0],
         color,
         normal,
         depth,

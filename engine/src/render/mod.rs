@@ -227,6 +227,11 @@ pub struct RenderOptions {
     /// Outline of outlined (hovered) parts: colour (alpha = opacity) and width in pixels.
     pub outline_color: [u8; 4],
     pub outline_width: u32,
+    /// Draw only this rectangle of the camera's view, `[x, y, width, height]` in pixels: the
+    /// frame is that size ([`Frame::origin`] its corner in the view) and holds the view's own
+    /// pixels (the cut is the whole view's; patches wholly outside the rectangle are not
+    /// drawn). `None`: the whole view.
+    pub window: Option<[u32; 4]>,
 }
 
 impl Default for RenderOptions {
@@ -239,6 +244,7 @@ impl Default for RenderOptions {
             ambient: 0.25,
             outline_color: [255, 214, 0, 255],
             outline_width: 3,
+            window: None,
         }
     }
 }
@@ -307,6 +313,9 @@ pub struct FrameProfile {
 pub struct Frame {
     pub width: u32,
     pub height: u32,
+    /// Where the frame's top-left pixel lies in the camera's view (`[0, 0]` unless a
+    /// [`RenderOptions::window`] was drawn).
+    pub origin: [u32; 2],
     /// Shaded colour (RGBA8, alpha 255 on the surface, the background colour elsewhere).
     pub color: Option<Vec<[u8; 4]>>,
     /// World-space unit normal facing the viewer; zero on the background.
@@ -315,6 +324,48 @@ pub struct Frame {
     pub depth: Option<Vec<f32>>,
     pub ids: Option<IdBuffer>,
     pub stats: RenderStats,
+}
+
+impl Frame {
+    /// The frame placed in a `width` × `height` view at its origin, the rest background
+    /// (colour 0, normal 0, depth `INFINITY`, ids [`NO_NODE`], [`NO_ID`], [`NO_ID`], 0): the
+    /// frame a render of the whole view gives inside the window.
+    pub fn embed(self, width: u32, height: u32) -> Frame {
+        let [ox, oy] = self.origin;
+        if self.origin == [0, 0] && self.width == width && self.height == height {
+            return self;
+        }
+        let (fw, fh) = (self.width as usize, self.height as usize);
+        let (w, h) = (width as usize, height as usize);
+        let (ox, oy) = (ox as usize, oy as usize);
+        fn place<T: Copy>(src: &[T], background: T, f: [usize; 4], [w, h]: [usize; 2]) -> Vec<T> {
+            let [ox, oy, fw, fh] = f;
+            let mut out = vec![background; w * h];
+            let n = fw.min(w.saturating_sub(ox));
+            for y in 0..fh.min(h.saturating_sub(oy)) {
+                let at = (oy + y) * w + ox;
+                out[at..at + n].copy_from_slice(&src[y * fw..y * fw + n]);
+            }
+            out
+        }
+        let f = [ox, oy, fw, fh];
+        let v = [w, h];
+        Frame {
+            width,
+            height,
+            origin: [0, 0],
+            color: self.color.as_deref().map(|c| place(c, [0u8; 4], f, v)),
+            normal: self.normal.as_deref().map(|n| place(n, [0f32; 3], f, v)),
+            depth: self.depth.as_deref().map(|d| place(d, f32::INFINITY, f, v)),
+            ids: self.ids.as_ref().map(|ids| IdBuffer {
+                node: place(&ids.node, NO_NODE, f, v),
+                vertex: place(&ids.vertex, NO_ID, f, v),
+                triangle: place(&ids.triangle, NO_ID, f, v),
+                highlight: place(&ids.highlight, 0, f, v),
+            }),
+            stats: self.stats,
+        }
+    }
 }
 
 /// Renderer settings.
@@ -459,6 +510,16 @@ impl Renderer {
             return Err(RenderError::BadOption(format!(
                 "ambient must be within [0, 1], got {}",
                 options.ambient
+            )));
+        }
+        if let Some([x, y, ww, wh]) = options.window
+            && (ww == 0
+                || wh == 0
+                || x.checked_add(ww).is_none_or(|e| e > w)
+                || y.checked_add(wh).is_none_or(|e| e > h))
+        {
+            return Err(RenderError::BadOption(format!(
+                "window {x},{y} {ww}x{wh} is not a non-empty rectangle of the {w}x{h} view"
             )));
         }
         if options.outline_width > MAX_OUTLINE_WIDTH {

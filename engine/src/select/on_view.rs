@@ -68,6 +68,64 @@ pub enum ViewSelectError {
     Select(#[from] SelectError),
 }
 
+/// Pixels kept around the strokes' bounding box (the heavy lasso's outer marker needs the
+/// area outside its band to be seen from the window's border).
+const WINDOW_MARGIN: u32 = 2;
+/// Markup's window: its strokes' bounding box grown by this share of its larger side.
+const MARKUP_MARGIN: f32 = 0.5;
+/// Half the side of the square drawn around a click.
+const CLICK_RADIUS: u32 = 4;
+
+/// The part of the view a selection reads, `[x, y, width, height]` (`None`: all of it). The
+/// lasso selects only inside its outline and the heavy lasso's cut only decides its band, so
+/// both need only their strokes' bounding box (plus [`WINDOW_MARGIN`]); a click needs its
+/// pixel. Markup's cut decides every pixel of the view: it reads the whole view. Inside the
+/// window the buffers are those of the whole view (the same cut, drawn with an off-centre
+/// crop of the same projection), so the selection is the same.
+fn window(input: &Input<'_>, camera: &Camera) -> Option<[u32; 4]> {
+    let (w, h) = (camera.width, camera.height);
+    let square = |x0: u32, y0: u32, x1: u32, y1: u32, margin: u32| {
+        let (x0, y0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
+        let (x1, y1) = ((x1 + 1 + margin).min(w), (y1 + 1 + margin).min(h));
+        (x0 < x1 && y0 < y1).then_some([x0, y0, x1 - x0, y1 - y0])
+    };
+    match *input {
+        Input::Click([x, y]) => {
+            if !(x.is_finite() && y.is_finite() && x >= 0.0 && y >= 0.0) {
+                return None;
+            }
+            let (x, y) = (x as u32, y as u32);
+            if x >= w || y >= h {
+                return None;
+            }
+            square(x, y, x, y, CLICK_RADIUS)
+        }
+        Input::Strokes { tool, mask, .. } => {
+            if mask.width != w || mask.height != h {
+                return None;
+            }
+            let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+            for (i, _) in mask.labels.iter().enumerate().filter(|(_, l)| **l != 0) {
+                let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
+                x0 = x0.min(x);
+                y0 = y0.min(y);
+                x1 = x1.max(x);
+                y1 = y1.max(y);
+            }
+            let margin = if tool == Tool::Markup {
+                // Markup's cut decides every pixel: what lies well beyond the strokes (farther
+                // from the foreground than the background strokes around it) stays out.
+                ((x1 - x0).max(y1 - y0) as f32 * MARKUP_MARGIN) as u32 + WINDOW_MARGIN
+            } else {
+                WINDOW_MARGIN
+            };
+            (x0 != u32::MAX)
+                .then(|| square(x0, y0, x1, y1, margin))
+                .flatten()
+        }
+    }
+}
+
 /// Renders `camera`'s buffers of `model` with a view cut of `pixel_error`, selects `input` on
 /// them and back-projects to original vertex ids; `base` is the vertex set the result will
 /// be combined with (its sums are counted, see [`BackProjection`]).
@@ -85,9 +143,12 @@ pub fn select_on_view(
             culling: Culling::ALL,
         },
         outputs: Outputs::ALL,
+        window: window(&input, camera),
         ..RenderOptions::default()
     };
-    let frame = renderer.render(model, camera, &options, &[])?;
+    let frame = renderer
+        .render(model, camera, &options, &[])?
+        .embed(camera.width, camera.height);
     let render_ms = frame.stats.total_ms;
     let buffers = Buffers::from_frame(&frame)?;
     if buffers.covered_count() == 0 {
