@@ -18,6 +18,8 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
+use rayon::prelude::*;
+
 use super::SelectError;
 use super::buffers::Buffers;
 use super::mask::{self, StrokeMask};
@@ -125,29 +127,33 @@ impl StepCosts {
             length * (1.0 + CREASE_COST * crease)
         };
         let mut forward = vec![[f32::INFINITY; 4]; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                if !buffers.covered(i) {
-                    continue;
-                }
-                for (k, &(dx, dy)) in FORWARD.iter().enumerate() {
-                    let (nx, ny) = (x as isize + dx, y as isize + dy);
-                    if nx < 0 || nx as usize >= w || ny as usize >= h {
+        // Rows are independent: one per core at a time.
+        forward
+            .par_chunks_mut(w.max(1))
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, out) in row.iter_mut().enumerate() {
+                    let i = y * w + x;
+                    if !buffers.covered(i) {
                         continue;
                     }
-                    let j = ny as usize * w + nx as usize;
-                    if buffers.covered(j) {
-                        let length = if dx != 0 && dy != 0 {
-                            std::f32::consts::SQRT_2
-                        } else {
-                            1.0
-                        };
-                        forward[i][k] = cost(i, j, length);
+                    for (k, &(dx, dy)) in FORWARD.iter().enumerate() {
+                        let (nx, ny) = (x as isize + dx, y as isize + dy);
+                        if nx < 0 || nx as usize >= w || ny as usize >= h {
+                            continue;
+                        }
+                        let j = ny as usize * w + nx as usize;
+                        if buffers.covered(j) {
+                            let length = if dx != 0 && dy != 0 {
+                                std::f32::consts::SQRT_2
+                            } else {
+                                1.0
+                            };
+                            out[k] = cost(i, j, length);
+                        }
                     }
                 }
-            }
-        }
+            });
         StepCosts {
             width: w,
             height: h,
@@ -185,16 +191,17 @@ impl StepCosts {
 /// covered) are `INFINITY`.
 pub fn geodesic_from(costs: &StepCosts, buffers: &Buffers<'_>, sources: &[u32]) -> Vec<f32> {
     let mut dist = vec![f32::INFINITY; costs.width * costs.height];
-    // Non-negative f32 distances order like their bit patterns.
-    let mut heap: BinaryHeap<Reverse<(u32, u32)>> = BinaryHeap::new();
+    // Non-negative f32 distances order like their bit patterns, and Dijkstra's keys only grow:
+    // a radix heap holds them.
+    let mut heap = RadixHeap::default();
     for &s in sources {
         let s = s as usize;
         if s < dist.len() && buffers.covered(s) {
             dist[s] = 0.0;
-            heap.push(Reverse((0, s as u32)));
+            heap.push(0, s as u32);
         }
     }
-    while let Some(Reverse((d, i))) = heap.pop() {
+    while let Some((d, i)) = heap.pop() {
         let d = f32::from_bits(d);
         let i = i as usize;
         if d > dist[i] {
@@ -204,11 +211,68 @@ pub fn geodesic_from(costs: &StepCosts, buffers: &Buffers<'_>, sources: &[u32]) 
             let nd = d + step;
             if nd < dist[j] {
                 dist[j] = nd;
-                heap.push(Reverse((nd.to_bits(), j as u32)));
+                heap.push(nd.to_bits(), j as u32);
             }
         }
     }
     dist
+}
+
+/// A monotone priority queue of `u32` keys (Ahuja, Mehlhorn, Orlin and Tarjan's radix heap):
+/// every key pushed is at least the last key popped, as in Dijkstra's algorithm. Bucket `b`
+/// holds the keys whose highest bit differing from the last popped key is bit `b − 1`
+/// (bucket 0: equal to it), so a pop redistributes one bucket at most: O(log C) amortised per
+/// item, with no comparisons between items.
+struct RadixHeap {
+    last: u32,
+    len: usize,
+    buckets: [Vec<(u32, u32)>; 33],
+}
+
+impl Default for RadixHeap {
+    fn default() -> Self {
+        RadixHeap {
+            last: 0,
+            len: 0,
+            buckets: std::array::from_fn(|_| Vec::new()),
+        }
+    }
+}
+
+impl RadixHeap {
+    fn bucket(last: u32, key: u32) -> usize {
+        32 - (key ^ last).leading_zeros() as usize
+    }
+
+    fn push(&mut self, key: u32, value: u32) {
+        debug_assert!(key >= self.last, "radix heap keys must not decrease");
+        let key = key.max(self.last);
+        self.buckets[Self::bucket(self.last, key)].push((key, value));
+        self.len += 1;
+    }
+
+    /// The item of the smallest key (any of them on ties).
+    fn pop(&mut self) -> Option<(u32, u32)> {
+        if self.len == 0 {
+            return None;
+        }
+        if self.buckets[0].is_empty() {
+            let b = (1..33).find(|&b| !self.buckets[b].is_empty())?;
+            let items = std::mem::take(&mut self.buckets[b]);
+            self.last = items.iter().map(|&(k, _)| k).min()?;
+            for (k, v) in &items {
+                self.buckets[Self::bucket(self.last, *k)].push((*k, *v));
+            }
+            // Keep the emptied bucket's allocation for later redistributions.
+            let mut spare = items;
+            spare.clear();
+            if self.buckets[b].is_empty() {
+                self.buckets[b] = spare;
+            }
+        }
+        self.len -= 1;
+        self.buckets[0].pop()
+    }
 }
 
 /// Normal change across each pixel at `scale` pixels: `max(1 − N(x−r)·N(x+r), 1 − N(y−r)·N(y+r))`
@@ -538,6 +602,48 @@ pub fn lasso(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Vec<bool>, Sele
 mod tests {
     use super::*;
     use crate::select::buffers::OwnedBuffers;
+
+    /// The radix heap pops what a binary heap pops, for Dijkstra-like (never decreasing)
+    /// pushes: keys spread over every bucket, ties and repeats.
+    #[test]
+    fn radix_heap_pops_in_key_order() {
+        let mut radix = RadixHeap::default();
+        let mut binary = BinaryHeap::new();
+        let mut state = 0x9e37_79b9u32;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        };
+        for k in 0..50u32 {
+            let key = next() >> 8;
+            radix.push(key, k);
+            binary.push(Reverse(key));
+        }
+        let mut popped = 0;
+        while let Some((key, _)) = radix.pop() {
+            let Some(Reverse(expected)) = binary.pop() else {
+                panic!("radix heap has more")
+            };
+            assert_eq!(key, expected);
+            popped += 1;
+            // Pushes at or above the key just popped, as Dijkstra's relaxations are.
+            if popped < 400 {
+                for _ in 0..(next() % 3) {
+                    let later = key.saturating_add(match next() % 4 {
+                        0 => 0,
+                        1 => next() % 16,
+                        2 => next() % 70_000,
+                        _ => next() >> 4,
+                    });
+                    radix.push(later, popped);
+                    binary.push(Reverse(later));
+                }
+            }
+        }
+        assert!(binary.is_empty() && popped > 400);
+    }
 
     /// A square ring of width `t` between squares [a, b) (outer) on a `size`² mask.
     fn ring(size: u32, a: u32, b: u32, t: u32) -> StrokeMask {
