@@ -221,6 +221,9 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         peak: report.peak_rss_bytes,
         output: report.output_bytes,
     };
+    if let Err(e) = crate::build_bytes::print(&output, options.zstd_level) {
+        println!("  (no breakdown of the format: {e:#})");
+    }
     let tools = if args.no_nexus {
         None
     } else {

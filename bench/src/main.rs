@@ -4,6 +4,7 @@
 //! server crate and the engine directly.
 
 mod build;
+mod build_bytes;
 mod maxflow;
 mod nexus;
 mod render;

@@ -637,6 +637,76 @@ pub fn payload_bound(max_triangles: u32) -> usize {
     PAYLOAD_HEADER + 16 * t + 3 * t * 96 + 4096
 }
 
+/// Names of a payload's streams, in their order (`docs/FORMAT.md`).
+pub const STREAM_NAMES: [&str; 6] = ["indices", "positions", "ids", "colours", "normals", "uvs"];
+
+/// Where one blob's bytes go (`bench build`'s breakdown of the format).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BlobBytes {
+    /// The whole blob as stored.
+    pub stored: usize,
+    /// Blob header (magic, compression, payload length, image length).
+    pub header: usize,
+    /// The texture atlas image (JPEG), stored as is.
+    pub image: usize,
+    /// The payload's own header (counts, flags, grid minimum, stream lengths).
+    pub payload_header: usize,
+    /// Each stream before compression, in [`STREAM_NAMES`] order.
+    pub streams: [usize; 6],
+    /// The compressed body (payload header and streams together, zstd).
+    pub body: usize,
+}
+
+/// Splits a blob into its parts without decoding its streams (the same framing checks as
+/// [`decode_limited`]).
+pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
+    if blob.len() < 12 {
+        return Err(CodecError::Truncated);
+    }
+    if blob[..4] != BLOB_MAGIC {
+        return Err(CodecError::Magic);
+    }
+    let payload_len = u32_at(blob, 8)? as usize;
+    if payload_len > 64 << 20 {
+        return Err(CodecError::Sizes);
+    }
+    let (image, header, body) = if blob[5] & BLOB_IMAGE != 0 {
+        let len = u32_at(blob, 12)? as usize;
+        let end = 16usize.checked_add(len).ok_or(CodecError::Truncated)?;
+        blob.get(16..end).ok_or(CodecError::Truncated)?;
+        (len, 16, &blob[end..])
+    } else {
+        (0, 12, &blob[12..])
+    };
+    let payload = match blob[4] {
+        COMPRESSION_NONE => body.to_vec(),
+        COMPRESSION_ZSTD => zstd::bulk::decompress(body, payload_len)
+            .map_err(|e| CodecError::Zstd(e.to_string()))?,
+        other => return Err(CodecError::Compression(other)),
+    };
+    if payload.len() != payload_len || payload.len() < PAYLOAD_HEADER {
+        return Err(CodecError::Truncated);
+    }
+    let mut streams = [0usize; 6];
+    for (i, l) in streams.iter_mut().enumerate() {
+        *l = u32_at(&payload, 28 + 4 * i)? as usize;
+    }
+    if PAYLOAD_HEADER + streams.iter().sum::<usize>() != payload.len() {
+        return Err(CodecError::Sizes);
+    }
+    Ok((
+        BlobBytes {
+            stored: blob.len(),
+            header,
+            image,
+            payload_header: PAYLOAD_HEADER,
+            streams,
+            body: body.len(),
+        },
+        payload,
+    ))
+}
+
 /// Decodes a blob into world-space flat arrays.
 pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
     decode_limited(blob, grid, MAX_ELEMENTS)
@@ -1014,6 +1084,41 @@ mod tests {
         let mut bad = blob.clone();
         bad[12..16].copy_from_slice(&(blob.len() as u32).to_le_bytes());
         assert!(decode(&bad, &grid).is_err());
+    }
+
+    /// The breakdown of a blob accounts for every byte of it and of its payload, and refuses
+    /// what does not frame.
+    #[test]
+    fn blob_bytes_account_for_every_byte() {
+        let (_, gp, ids, colors, normals, indices) = sheet();
+        for level in [0, 3] {
+            let blob = encode(
+                &PatchRef {
+                    grid_positions: &gp,
+                    colors: Some(&colors),
+                    normals: Some(&normals),
+                    original_ids: &ids,
+                    indices: &indices,
+                    shift: 0,
+                    texture: None,
+                },
+                level,
+            );
+            let (b, payload) = blob_bytes(&blob).expect("frames");
+            assert_eq!(b.stored, blob.len());
+            assert_eq!(b.header + b.image + b.body, blob.len());
+            assert_eq!(
+                b.payload_header + b.streams.iter().sum::<usize>(),
+                payload.len()
+            );
+            // Indices, positions, ids and colours are there; normals only for border vertices.
+            assert!(b.streams[..4].iter().all(|&n| n > 0), "{b:?}");
+            assert_eq!(b.streams[5], 0, "no texture coordinates");
+            assert!(blob_bytes(&blob[..blob.len() - 1]).is_err());
+            let mut bad = blob.clone();
+            bad[0] ^= 1;
+            assert!(matches!(blob_bytes(&bad), Err(CodecError::Magic)));
+        }
     }
 
     #[test]

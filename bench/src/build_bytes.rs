@@ -1,0 +1,116 @@
+//! Where the bytes of a `.mwlod` go (issue 15, item 5): every patch blob split into its parts
+//! by the codec's own framing ([`codec::blob_bytes`]), each payload stream also compressed alone
+//! at the build's zstd level to attribute the compressed body to the attributes, for all
+//! patches and for the full-resolution ones (level 0). The file's tables are what is left.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use meshwiki_engine::lod::LodFile;
+use meshwiki_engine::lod::codec::{self, STREAM_NAMES};
+
+#[derive(Default)]
+struct Sums {
+    patches: usize,
+    stored: usize,
+    headers: usize,
+    image: usize,
+    body: usize,
+    raw: [usize; 6],
+    alone: [usize; 6],
+    payload_headers: usize,
+}
+
+impl Sums {
+    fn add(&mut self, b: &codec::BlobBytes, payload: &[u8], level: i32) {
+        self.patches += 1;
+        self.stored += b.stored;
+        self.headers += b.header;
+        self.image += b.image;
+        self.body += b.body;
+        self.payload_headers += b.payload_header;
+        let mut at = b.payload_header;
+        for (k, &len) in b.streams.iter().enumerate() {
+            let s = &payload[at..at + len];
+            at += len;
+            self.raw[k] += len;
+            self.alone[k] += if len == 0 {
+                0
+            } else if level > 0 {
+                zstd::bulk::compress(s, level).map_or(len, |c| c.len().min(len))
+            } else {
+                len
+            };
+        }
+    }
+}
+
+/// Prints the breakdown of the LOD file at `path` (built at zstd `level`).
+pub fn print(path: &Path, level: i32) -> Result<()> {
+    let lod = LodFile::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let (mut all, mut leaves) = (Sums::default(), Sums::default());
+    for (id, node) in lod.nodes().iter().enumerate() {
+        let blob = lod.blob(id as u32)?;
+        let (b, payload) = codec::blob_bytes(blob).with_context(|| format!("patch {id}"))?;
+        all.add(&b, &payload, level);
+        if node.level == 0 {
+            leaves.add(&b, &payload, level);
+        }
+    }
+    let file = lod.bytes().len();
+    let mb = |b: usize| b as f64 / 1e6;
+    println!(
+        "where the bytes go: {} patches, {:.2} MB stored of a {:.2} MB file ({:.2} MB of tables); leaves: {} patches, {:.2} MB",
+        all.patches,
+        mb(all.stored),
+        mb(file),
+        mb(file.saturating_sub(all.stored)),
+        leaves.patches,
+        mb(leaves.stored)
+    );
+    println!(
+        "  {:<16} {:>10} {:>14} {:>8} {:>16}",
+        "part", "raw MB", "zstd alone MB", "share", "leaves: alone MB"
+    );
+    let alone_total: usize = all.alone.iter().sum::<usize>().max(1);
+    // The compressed body attributed to the streams in proportion to their size compressed alone.
+    let body_share = |a: usize| a as f64 / alone_total as f64 * all.body as f64;
+    for (k, name) in STREAM_NAMES.iter().enumerate() {
+        if all.raw[k] == 0 {
+            continue;
+        }
+        println!(
+            "  {:<16} {:>10.2} {:>14.2} {:>7.1}% {:>16.2}",
+            name,
+            mb(all.raw[k]),
+            mb(all.alone[k]),
+            100.0 * body_share(all.alone[k]) / all.stored.max(1) as f64,
+            mb(leaves.alone[k])
+        );
+    }
+    if all.image > 0 {
+        println!(
+            "  {:<16} {:>10.2} {:>14} {:>7.1}% {:>16.2}",
+            "texture (JPEG)",
+            mb(all.image),
+            "-",
+            100.0 * all.image as f64 / all.stored.max(1) as f64,
+            mb(leaves.image)
+        );
+    }
+    println!(
+        "  {:<16} {:>10.2} {:>14} {:>7.1}%   ({} + {} bytes a patch, before zstd for the second)",
+        "headers",
+        mb(all.headers + all.payload_headers),
+        "-",
+        100.0 * all.headers as f64 / all.stored.max(1) as f64,
+        all.headers / all.patches.max(1),
+        all.payload_headers / all.patches.max(1)
+    );
+    println!(
+        "  (the body is one zstd frame a patch: {:.2} MB for {:.2} MB of streams compressed alone; shares split it by those)",
+        mb(all.body),
+        mb(alone_total)
+    );
+    Ok(())
+}
