@@ -84,14 +84,14 @@ export async function poll(page, fn, accept = Boolean, timeout = 60_000, arg = u
 
 /**
  * `page.goto(url)` on a page that may navigate by itself meanwhile (a model page reloads
- * when its build ends): an interrupted navigation is tried again.
+ * when its build ends): a navigation interrupted or aborted by it is tried again.
  */
 export async function gotoSettled(page, url, tries = 5) {
   for (let k = 1; ; k++) {
     try {
       return await page.goto(url);
     } catch (err) {
-      if (k >= tries || !/interrupted by another navigation|because of a navigation/i.test(String(err && err.message))) throw err;
+      if (k >= tries || !/interrupted by another navigation|because of a navigation|net::ERR_ABORTED/i.test(String(err && err.message))) throw err;
       await page.waitForLoadState('load').catch(() => {});
     }
   }
