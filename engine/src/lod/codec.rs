@@ -657,9 +657,17 @@ pub struct BlobBytes {
     pub body: usize,
 }
 
-/// Splits a blob into its parts without decoding its streams (the same framing checks as
-/// [`decode_limited`]).
-pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
+/// The parts of a blob's framing: its image section and its body, with the payload the body
+/// decompresses to.
+struct Framed<'a> {
+    image: Option<&'a [u8]>,
+    body: &'a [u8],
+    payload: Vec<u8>,
+}
+
+/// Checks a blob's framing and decompresses its payload, refusing a payload declared larger
+/// than `max_payload` bytes before anything is allocated.
+fn unframe(blob: &[u8], max_payload: usize) -> Result<Framed<'_>, CodecError> {
     if blob.len() < 12 {
         return Err(CodecError::Truncated);
     }
@@ -667,16 +675,16 @@ pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
         return Err(CodecError::Magic);
     }
     let payload_len = u32_at(blob, 8)? as usize;
-    if payload_len > 64 << 20 {
+    if payload_len > max_payload {
         return Err(CodecError::Sizes);
     }
-    let (image, header, body) = if blob[5] & BLOB_IMAGE != 0 {
+    let (image, body) = if blob[5] & BLOB_IMAGE != 0 {
         let len = u32_at(blob, 12)? as usize;
         let end = 16usize.checked_add(len).ok_or(CodecError::Truncated)?;
-        blob.get(16..end).ok_or(CodecError::Truncated)?;
-        (len, 16, &blob[end..])
+        let image = blob.get(16..end).ok_or(CodecError::Truncated)?;
+        (Some(image), &blob[end..])
     } else {
-        (0, 12, &blob[12..])
+        (None, &blob[12..])
     };
     let payload = match blob[4] {
         COMPRESSION_NONE => body.to_vec(),
@@ -687,6 +695,19 @@ pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
     if payload.len() != payload_len || payload.len() < PAYLOAD_HEADER {
         return Err(CodecError::Truncated);
     }
+    Ok(Framed {
+        image,
+        body,
+        payload,
+    })
+}
+
+/// Splits a blob into its parts without decoding its streams (the framing of [`unframe`], as
+/// [`decode_limited`] reads it).
+pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
+    let framed = unframe(blob, 64 << 20)?;
+    let (image, header) = framed.image.map_or((0, 12), |i| (i.len(), 16));
+    let (body, payload) = (framed.body, framed.payload);
     let mut streams = [0usize; 6];
     for (i, l) in streams.iter_mut().enumerate() {
         *l = u32_at(&payload, 28 + 4 * i)? as usize;
@@ -718,33 +739,9 @@ pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
 /// of memory (a few times [`payload_bound`]).
 pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Patch, CodecError> {
     let max_triangles = max_triangles.min(MAX_ELEMENTS);
-    if blob.len() < 12 {
-        return Err(CodecError::Truncated);
-    }
-    if blob[..4] != BLOB_MAGIC {
-        return Err(CodecError::Magic);
-    }
-    let payload_len = u32_at(blob, 8)? as usize;
-    if payload_len > (64 << 20).min(payload_bound(max_triangles)) {
-        return Err(CodecError::Sizes);
-    }
-    let (image, body) = if blob[5] & BLOB_IMAGE != 0 {
-        let len = u32_at(blob, 12)? as usize;
-        let end = 16usize.checked_add(len).ok_or(CodecError::Truncated)?;
-        let image = blob.get(16..end).ok_or(CodecError::Truncated)?;
-        (Some(image.to_vec()), &blob[end..])
-    } else {
-        (None, &blob[12..])
-    };
-    let payload = match blob[4] {
-        COMPRESSION_NONE => body.to_vec(),
-        COMPRESSION_ZSTD => zstd::bulk::decompress(body, payload_len)
-            .map_err(|e| CodecError::Zstd(e.to_string()))?,
-        other => return Err(CodecError::Compression(other)),
-    };
-    if payload.len() != payload_len || payload.len() < PAYLOAD_HEADER {
-        return Err(CodecError::Truncated);
-    }
+    let Framed { image, payload, .. } =
+        unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
+    let image = image.map(<[u8]>::to_vec);
     let vertex_count = u32_at(&payload, 0)?;
     let triangle_count = u32_at(&payload, 4)?;
     let flags = u32_at(&payload, 8)?;
