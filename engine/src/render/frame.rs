@@ -132,6 +132,17 @@ fn side_planes(m: &Mat4) -> [Vec4; 4] {
     [r3 + r0, r3 - r0, r3 + r1, r3 - r1].map(|p| p / p.truncate().length().max(f32::MIN_POSITIVE))
 }
 
+/// Waits (at most [`GPU_TIMEOUT`]) until the GPU has finished submission `index`.
+fn wait(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<(), RenderError> {
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(index),
+            timeout: Some(GPU_TIMEOUT),
+        })
+        .map(|_| ())
+        .map_err(|e| RenderError::Gpu(e.to_string()))
+}
+
 fn rgba(c: [u8; 4]) -> [f32; 4] {
     c.map(|v| v as f32 / 255.0)
 }
@@ -389,12 +400,7 @@ impl Renderer {
             let index = self.gpu.queue.submit([encoder.finish()]);
             stats.profile.submit_ms += ms(t);
             let t = Instant::now();
-            device
-                .poll(wgpu::PollType::Wait {
-                    submission_index: Some(index),
-                    timeout: Some(GPU_TIMEOUT),
-                })
-                .map_err(|e| RenderError::Gpu(e.to_string()))?;
+            wait(device, index)?;
             stats.profile.gpu_ms += ms(t);
             drop(patches);
         }
@@ -838,12 +844,7 @@ fn read_frame(
                 let _ = tx.send((i, res));
             });
     }
-    device
-        .poll(wgpu::PollType::Wait {
-            submission_index: Some(index),
-            timeout: Some(GPU_TIMEOUT),
-        })
-        .map_err(|e| RenderError::Gpu(e.to_string()))?;
+    wait(device, index)?;
     stats.profile.gpu_ms += ms(t);
     let t = Instant::now();
     let deadline = Instant::now() + GPU_TIMEOUT;
