@@ -3,6 +3,7 @@
 //! - [`mesh`]: streaming import of scans (PLY, OBJ, glTF/GLB, STL).
 //! - [`lod`]: out-of-core build of the multiresolution patch DAG, its file format, and cuts.
 //! - [`render`]: headless wgpu rendering of cuts (colour, normal, depth, id buffers).
+//! - [`segment`]: surface segments at several scales, stored beside the hierarchy.
 //! - [`select`]: graph-cut region selection on rendered buffers, back-projected to original vertices.
 //!
 //! The server crate (`meshwiki`) drives these through plain function calls and the
@@ -13,4 +14,5 @@ pub mod lod;
 pub mod mesh;
 pub mod progress;
 pub mod render;
+pub mod segment;
 pub mod select;

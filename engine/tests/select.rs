@@ -18,6 +18,7 @@ use meshwiki_engine::render::{
 };
 use meshwiki_engine::select::mask::{self, StrokeMask};
 use meshwiki_engine::select::modes::{self, Mode, VertexSet};
+use meshwiki_engine::select::segments::ViewSegments;
 use meshwiki_engine::select::{
     BackProjectOptions, BackProjection, Buffers, EnergyParams, Tool, back_project, point,
     select_pixels,
@@ -161,7 +162,17 @@ fn select_vertices(
     strokes: &StrokeMask,
     base: Option<&RoaringBitmap>,
 ) -> BackProjection {
-    let sel = select_pixels(tool, strokes, buffers, &EnergyParams::default(), false).unwrap();
+    // The model's surface segments, as the server uses them.
+    let segments = p.model.segments().map(|f| ViewSegments::of(f, buffers));
+    let sel = select_pixels(
+        tool,
+        strokes,
+        buffers,
+        &EnergyParams::default(),
+        false,
+        segments.as_ref(),
+    )
+    .unwrap();
     back_project(
         p.model.lod(),
         c,

@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Instant, SystemTime};
 
 use meshwiki_engine::lod::LodFile;
-use meshwiki_engine::render::RenderModel;
+use meshwiki_engine::render::{RenderModel, open_segments};
 
 use super::AppError;
 use crate::render::RenderService;
@@ -221,16 +221,18 @@ impl ModelRegistry {
             return Ok(e.open.clone());
         }
         let opened = path.clone();
-        let lod = tokio::task::spawn_blocking(move || LodFile::open(&opened))
-            .await
-            .map_err(AppError::internal)?
-            .map_err(|e| AppError::internal(format!("LOD file unreadable: {e}")))?;
+        let (lod, segments) = tokio::task::spawn_blocking(move || {
+            LodFile::open(&opened).map(|lod| (lod, open_segments(&opened)))
+        })
+        .await
+        .map_err(AppError::internal)?
+        .map_err(|e| AppError::internal(format!("LOD file unreadable: {e}")))?;
         let lod = Arc::new(lod);
         let h = lod.header();
         let open = Arc::new(OpenModel {
             id: model_id,
             etag: format!("\"{:08x}-{:x}\"", h.header_crc, lod.bytes().len()),
-            render: RenderModel::new(lod.clone()),
+            render: RenderModel::new(lod.clone()).with_segments(segments),
             lod,
             path,
             json: OnceLock::new(),
@@ -299,9 +301,16 @@ async fn remove_model_file(data_dir: &Path, relative: &str) {
     }
     let path = data_dir.join(rel);
     let p = path.clone();
-    let result = tokio::task::spawn_blocking(move || crate::remove_file_or_dir(&p))
-        .await
-        .unwrap_or_else(|e| Err(std::io::Error::other(e)));
+    let result = tokio::task::spawn_blocking(move || {
+        // The surface segments beside it go with it.
+        let segments = meshwiki_engine::segment::path_for(&p);
+        if segments != p {
+            crate::remove_file_or_dir(&segments)?;
+        }
+        crate::remove_file_or_dir(&p)
+    })
+    .await
+    .unwrap_or_else(|e| Err(std::io::Error::other(e)));
     if let Err(e) = result {
         tracing::warn!(path = %path.display(), error = %e, "cannot remove LOD file");
     }

@@ -857,6 +857,7 @@ impl Jobs {
         let seed = job.kind == JobKind::Demo && job.created_by.is_some();
         if !jobs::finish_done(db, job.id, model_id, &built, !seed).await? {
             let _ = tokio::fs::remove_file(&output).await;
+            let _ = tokio::fs::remove_file(meshwiki_engine::segment::path_for(&output)).await;
             jobs::finish_failed(db, job.id, JobStatus::Cancelled, "the model was deleted").await?;
             self.remove_source(job).await;
             return Ok(JobEnd::Cancelled);
@@ -995,6 +996,7 @@ fn cleanup_dirs(
                 Some(pid) => !process_alive(pid),
                 None => name
                     .strip_suffix(".mwlod")
+                    .or_else(|| name.strip_suffix(".mwseg"))
                     .and_then(|id| id.parse::<i64>().ok())
                     .is_some_and(|id| !model_ids.contains(&id)),
             };

@@ -179,7 +179,11 @@ fn import_then_export_cuts() {
     let out = meshwiki(&["import", notes.to_str().unwrap(), "--title", "X"], data);
     assert!(!out.status.success());
     assert!(text(&out.stderr).contains("unknown file extension"));
-    assert_eq!(names(&data.join("models")), vec!["1.mwlod".to_string()]);
+    // The LOD file and its surface segments.
+    assert_eq!(
+        names(&data.join("models")),
+        vec!["1.mwlod".to_string(), "1.mwseg".to_string()]
+    );
 
     // Uniform cuts: input vertex ids, input positions, the input's boundary, the engine's cut.
     let lod = LodFile::open(&data.join("models/1.mwlod")).unwrap();

@@ -193,7 +193,10 @@ fn a_build_interrupted_by_a_crash_restarts() {
         200
     );
     no_leftovers(dir.path());
-    assert_eq!(names(&models_dir), vec![format!("{model}.mwlod")]);
+    assert_eq!(
+        names(&models_dir),
+        vec![format!("{model}.mwlod"), format!("{model}.mwseg")]
+    );
 }
 
 #[test]

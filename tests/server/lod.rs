@@ -341,13 +341,18 @@ fn upload_build_and_serve_lod() {
     assert_eq!(page.status, 200);
     assert!(page.text().contains("ready"));
 
-    // Nothing is left in uploads/; models/ holds the two LOD files only.
+    // Nothing is left in uploads/; models/ holds the two LOD files and their surface
+    // segments only.
     assert!(names(&dir.path().join("uploads")).is_empty());
-    assert_eq!(
-        names(&dir.path().join("models")),
-        vec![format!("{model_id}.mwlod"), format!("{form_model}.mwlod")]
-    );
-    // Deleting a model removes its file; its hierarchy is gone.
+    let mut files = vec![
+        format!("{model_id}.mwlod"),
+        format!("{model_id}.mwseg"),
+        format!("{form_model}.mwlod"),
+        format!("{form_model}.mwseg"),
+    ];
+    files.sort();
+    assert_eq!(names(&dir.path().join("models")), files);
+    // Deleting a model removes its files; its hierarchy is gone.
     assert_eq!(
         admin.delete(&format!("/api/v1/models/{form_model}")).status,
         204
@@ -357,6 +362,6 @@ fn upload_build_and_serve_lod() {
         .assert_error(404);
     assert_eq!(
         names(&dir.path().join("models")),
-        vec![format!("{model_id}.mwlod")]
+        vec![format!("{model_id}.mwlod"), format!("{model_id}.mwseg")]
     );
 }

@@ -209,12 +209,16 @@ impl Api {
         &self,
         model: i64,
         tool: &str,
+        params: Option<&Value>,
         camera: &Camera,
         mask_png: &[u8],
         base: Option<&str>,
     ) -> Result<std::result::Result<Draft, String>> {
         let boundary = "----meshwikibenchselect4b1d";
         let mut request = json!({"tool": tool, "camera": camera_json(camera)});
+        if let Some(p) = params {
+            request["params"] = p.clone();
+        }
         if let Some(b) = base {
             request["mode"] = json!("subtract");
             request["base"] = json!(b);

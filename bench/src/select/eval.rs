@@ -25,13 +25,41 @@ pub const MIN_PIXELS: usize = 200;
 /// Fewest visible vertices of a region for it to be evaluated.
 pub const MIN_VISIBLE: u64 = 20;
 
-/// The tools evaluated, in the order they are reported; the last is the reference.
-pub const TOOLS: [(&str, &str); 4] = [
+/// The tools evaluated, in the order they are reported: the three tools, the exact
+/// on-screen mask sent as a lasso (the reference: what back-projection alone loses), and the
+/// two graph-cut tools on the pixels alone (surface segments off: `w_seg` 0, `seg_edge` 1),
+/// side by side with the same strokes.
+pub const TOOLS: [(&str, &str); 6] = [
     ("heavy_lasso", "heavy lasso"),
     ("markup", "markup"),
     ("lasso", "lasso"),
     ("exact_mask", "exact mask (ref.)"),
+    ("heavy_lasso_pixels", "heavy lasso, pixels"),
+    ("markup_pixels", "markup, pixels"),
 ];
+
+/// The API tool and energy parameters of a [`TOOLS`] entry; `params` (the `--params`
+/// option) are sent with the heavy lasso and markup, under the pixels-only overrides.
+fn api_of(
+    name: &str,
+    params: Option<&serde_json::Value>,
+) -> (&'static str, Option<serde_json::Value>) {
+    let with = |extra: serde_json::Value| {
+        let mut p = params.cloned().unwrap_or_else(|| serde_json::json!({}));
+        if let (Some(p), Some(e)) = (p.as_object_mut(), extra.as_object()) {
+            p.extend(e.clone());
+        }
+        Some(p).filter(|p| p.as_object().is_some_and(|o| !o.is_empty()))
+    };
+    let pixels_only = || with(serde_json::json!({"w_seg": 0.0, "w_seg_out": 0.0, "seg_edge": 1.0}));
+    match name {
+        "heavy_lasso" => ("heavy_lasso", with(serde_json::json!({}))),
+        "markup" => ("markup", with(serde_json::json!({}))),
+        "heavy_lasso_pixels" => ("heavy_lasso", pixels_only()),
+        "markup_pixels" => ("markup", pixels_only()),
+        _ => ("lasso", None),
+    }
+}
 
 /// One tool on one region.
 #[derive(Debug, Clone, Serialize)]
@@ -183,7 +211,7 @@ fn score(
 fn submit(
     api: &Api,
     model: i64,
-    tool: &str,
+    (tool, params): (&str, Option<&serde_json::Value>),
     camera: &Camera,
     steps: Vec<Vec<u8>>,
     dump: Option<(&Path, &[bool], &[bool])>,
@@ -198,7 +226,14 @@ fn submit(
     let mut count = 0;
     for (k, labels) in steps.into_iter().enumerate() {
         let m = StrokeMask::new(camera.width, camera.height, labels)?;
-        match api.select(model, tool, camera, &m.encode_png(), draft.as_deref())? {
+        match api.select(
+            model,
+            tool,
+            params,
+            camera,
+            &m.encode_png(),
+            draft.as_deref(),
+        )? {
             Ok(d) => {
                 if let Some((path, region, covered)) = dump {
                     let png = api.selection_png(&d.id)?;
@@ -302,6 +337,8 @@ pub struct Case<'a> {
     pub seed: u64,
     /// Write pictures of every selection here.
     pub dump: Option<&'a Path>,
+    /// Energy parameters sent with the heavy lasso and markup.
+    pub params: Option<&'a serde_json::Value>,
 }
 
 /// Evaluates every tool on one region.
@@ -315,7 +352,15 @@ pub fn region(c: &Case<'_>) -> Result<std::result::Result<RegionResult, Skip>> {
 
     // Visible ground truth: what a lasso over the whole view selects, within the region.
     let whole = vec![mask::LASSO; w * h];
-    let visible = submit(c.api, c.model_id, "lasso", &camera, vec![whole], None)?.set;
+    let visible = submit(
+        c.api,
+        c.model_id,
+        ("lasso", None),
+        &camera,
+        vec![whole],
+        None,
+    )?
+    .set;
     let truth = &visible & &c.region.vertices;
     if pixels < MIN_PIXELS || truth.len() < MIN_VISIBLE {
         return Ok(Err(Skip::BarelyVisible {
@@ -335,23 +380,29 @@ pub fn region(c: &Case<'_>) -> Result<std::result::Result<RegionResult, Skip>> {
     let steps = |first: Vec<u8>, holes: Option<Vec<u8>>| {
         [Some(first), holes].into_iter().flatten().collect()
     };
-    let all: [Vec<Vec<u8>>; 4] = [
-        steps(s.heavy_lasso, s.heavy_lasso_holes),
-        vec![s.markup],
+    let heavy: Vec<Vec<u8>> = steps(s.heavy_lasso, s.heavy_lasso_holes);
+    let all: [Vec<Vec<u8>>; 6] = [
+        heavy.clone(),
+        vec![s.markup.clone()],
         steps(s.lasso, s.lasso_holes),
         vec![exact],
+        heavy,
+        vec![s.markup],
     ];
     for ((name, _), labels) in TOOLS.iter().zip(all) {
-        let api_tool = if *name == "exact_mask" {
-            "lasso"
-        } else {
-            *name
-        };
+        let (api_tool, params) = api_of(name, c.params);
         let file = c
             .dump
             .map(|d| d.join(format!("{}_{}_{name}.png", c.psb_id, c.region.segment)));
         let dump = file.as_deref().map(|f| (f, &on_screen[..], &covered[..]));
-        let got = submit(c.api, c.model_id, api_tool, &camera, labels, dump)?;
+        let got = submit(
+            c.api,
+            c.model_id,
+            (api_tool, params.as_ref()),
+            &camera,
+            labels,
+            dump,
+        )?;
         tools.push(score(name, &truth, &c.region.shared, &got));
     }
     tracing::debug!(

@@ -72,6 +72,66 @@ pub struct Args {
     /// strokes red/yellow/magenta).
     #[arg(long, value_name = "DIR")]
     pub dump: Option<PathBuf>,
+    /// Instead of one protocol, sweep the stroke model ([`sweep`]: view sizes, bands,
+    /// jitters, markup stroke counts, lengths and reach) and print every tool's worst setting.
+    #[arg(long)]
+    pub sweep: bool,
+    /// Energy parameters (JSON, as the selections API's `params`) sent with the heavy lasso
+    /// and markup, e.g. `{"w_seg": 3}`.
+    #[arg(long, value_parser = parse_params)]
+    pub params: Option<serde_json::Value>,
+    /// With `--sweep`: only these settings (1-based, comma-separated).
+    #[arg(long, value_delimiter = ',', requires = "sweep")]
+    pub settings: Vec<usize>,
+}
+
+/// One protocol: the view size and the simulated user.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Setting {
+    pub width: u32,
+    pub height: u32,
+    pub user: UserModel,
+}
+
+/// The sweep over the stroke model (issue 13, item 5): views from 640×480 to 1920×1080,
+/// heavy bands of 8–24 px, jitter of 2–6 px, 1–5 markup strokes a side, strokes that stop
+/// short (a third of the default length) or run long, background strokes close to the region
+/// or far from it. The default protocol is the third.
+pub fn sweep() -> Vec<Setting> {
+    /// (width, height, band, jitter, fg strokes, bg strokes, length, bg reach)
+    type Row = (u32, u32, f32, f32, usize, usize, f32, f32);
+    let table: [Row; 6] = [
+        (640, 480, 8.0, 2.0, 1, 1, 0.5, 40.0),
+        (960, 640, 16.0, 4.0, 2, 2, 1.0, 80.0),
+        (1280, 720, 12.0, 3.0, 3, 6, 1.0, 80.0),
+        (1920, 1080, 24.0, 6.0, 5, 5, 1.5, 160.0),
+        (960, 640, 16.0, 4.0, 1, 3, 0.3, 120.0),
+        (1280, 720, 20.0, 5.0, 2, 1, 0.6, 200.0),
+    ];
+    table
+        .iter()
+        .map(
+            |&(width, height, band, jitter, fg, bg, length, reach)| Setting {
+                width,
+                height,
+                user: UserModel {
+                    fg_strokes: fg,
+                    bg_strokes: bg,
+                    stroke_length: length,
+                    bg_reach: reach,
+                    ..UserModel::new(jitter, band)
+                },
+            },
+        )
+        .collect()
+}
+
+fn parse_params(s: &str) -> std::result::Result<serde_json::Value, String> {
+    let v: serde_json::Value = serde_json::from_str(s).map_err(|e| e.to_string())?;
+    if !v.is_object() {
+        return Err("a JSON object of energy parameters".into());
+    }
+    Ok(v)
 }
 
 /// Scratch directory removed on drop.
@@ -209,16 +269,109 @@ pub fn run(args: Args) -> Result<()> {
     let running = mw.serve()?;
     let api = Api::login(&running.base, "bench", &password)?;
     tracing::info!(base = %running.base, "server started");
-    let user = UserModel {
-        jitter: args.jitter,
-        band: args.band,
+    let settings = if args.sweep {
+        let all = sweep();
+        if args.settings.is_empty() {
+            all
+        } else {
+            let mut picked = Vec::new();
+            for &k in &args.settings {
+                match all.get(k.wrapping_sub(1)) {
+                    Some(s) => picked.push(*s),
+                    None => bail!("--settings: there are settings 1 to {}", all.len()),
+                }
+            }
+            picked
+        }
+    } else {
+        vec![Setting {
+            width: args.width,
+            height: args.height,
+            user: UserModel::new(args.jitter, args.band),
+        }]
     };
+    let mut runs = Vec::new();
+    let mut worst: Vec<Option<(usize, f64, f64)>> = vec![None; TOOLS.len()];
+    for (k, setting) in settings.iter().enumerate() {
+        if args.sweep {
+            println!("setting {} of {}", k + 1, settings.len());
+        }
+        let (results, skipped, eval_s) = evaluate(&args, &api, &mw, &models, setting)?;
+        let summary = report(
+            setting, args.seed, &models, &results, &skipped, import_s, eval_s,
+        );
+        for (t, (name, _)) in TOOLS.iter().enumerate() {
+            let m = summary[*name]["mean_error"].as_f64().unwrap_or(f64::NAN);
+            let p90 = summary[*name]["p90_error"].as_f64().unwrap_or(f64::NAN);
+            if worst[t].is_none_or(|(_, wm, _)| m > wm) {
+                worst[t] = Some((k, m, p90));
+            }
+        }
+        runs.push(json!({
+            "setting": setting,
+            "summary": summary,
+            "regions": results,
+            "skipped": skipped.iter().map(|(m, s, why)| json!({"model": m, "segment": s, "why": why}))
+                .collect::<Vec<_>>(),
+            "seconds": {"evaluate": eval_s},
+        }));
+    }
+    drop(running);
+    if args.sweep {
+        println!("worst setting per tool (by mean error):");
+        for (t, (_, label)) in TOOLS.iter().enumerate() {
+            if let Some((k, m, p90)) = worst[t] {
+                let s = &settings[k];
+                println!(
+                    "  {label:<20} setting {}: {}x{}, band {} px, jitter {} px, markup {}+{} \
+                     strokes ×{} long, reach {} px: mean {:.2}%, p90 {:.2}%",
+                    k + 1,
+                    s.width,
+                    s.height,
+                    s.user.band,
+                    s.user.jitter,
+                    s.user.fg_strokes,
+                    s.user.bg_strokes,
+                    s.user.stroke_length,
+                    s.user.bg_reach,
+                    m * 100.0,
+                    p90 * 100.0
+                );
+            }
+        }
+    }
+    println!("  total time   {:.1} s", started.elapsed().as_secs_f64());
+    if let Some(out) = &args.out {
+        let doc = json!({
+            "settings": {"psb": args.psb, "models": ids, "seed": args.seed,
+                          "min_region_share": MIN_REGION_SHARE,
+                          "min_pixels": eval::MIN_PIXELS},
+            "runs": runs,
+            "seconds": {"import": import_s, "total": started.elapsed().as_secs_f64()},
+        });
+        write_json(out, &doc)?;
+        println!("  figures      {}", out.display());
+    }
+    Ok(())
+}
+
+/// Regions evaluated, regions skipped.
+type Evaluated = (Vec<RegionResult>, Vec<(u32, u32, Skip)>, f64);
+
+/// Every region of every model under one setting.
+fn evaluate(
+    args: &Args,
+    api: &Api,
+    mw: &Meshwiki,
+    models: &[Model],
+    setting: &Setting,
+) -> Result<Evaluated> {
     let total: usize = models.iter().map(|m| m.seg.regions.len()).sum();
     let regions_bar = bar(total as u64, "select");
     let eval_started = Instant::now();
     let mut results: Vec<RegionResult> = Vec::new();
     let mut skipped = Vec::new();
-    for m in &models {
+    for m in models {
         for region in &m.seg.regions {
             regions_bar.set_message(format!(
                 "{} ({}) segment {}",
@@ -227,16 +380,17 @@ pub fn run(args: Args) -> Result<()> {
                 region.segment
             ));
             let case = eval::Case {
-                api: &api,
+                api,
                 model_id: m.model_id,
                 psb_id: m.psb_id,
                 seg: &m.seg,
                 region,
-                width: args.width,
-                height: args.height,
-                user,
+                width: setting.width,
+                height: setting.height,
+                user: setting.user,
                 seed: args.seed,
                 dump: args.dump.as_deref(),
+                params: args.params.as_ref(),
             };
             let outcome = eval::region(&case).with_context(|| {
                 format!(
@@ -254,28 +408,7 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     regions_bar.finish_and_clear();
-    let eval_s = eval_started.elapsed().as_secs_f64();
-    drop(running);
-
-    let summary = report(&args, &models, &results, &skipped, import_s, eval_s);
-    println!("  total time   {:.1} s", started.elapsed().as_secs_f64());
-    if let Some(out) = &args.out {
-        let doc = json!({
-            "settings": {"psb": args.psb, "models": ids, "jitter_px": args.jitter,
-                          "band_px": args.band, "seed": args.seed, "width": args.width,
-                          "height": args.height, "min_region_share": MIN_REGION_SHARE,
-                          "min_pixels": eval::MIN_PIXELS},
-            "summary": summary,
-            "regions": results,
-            "skipped": skipped.iter().map(|(m, s, why)| json!({"model": m, "segment": s, "why": why}))
-                .collect::<Vec<_>>(),
-            "seconds": {"import": import_s, "evaluate": eval_s,
-                         "total": started.elapsed().as_secs_f64()},
-        });
-        write_json(out, &doc)?;
-        println!("  figures      {}", out.display());
-    }
-    Ok(())
+    Ok((results, skipped, eval_started.elapsed().as_secs_f64()))
 }
 
 /// Writes `doc` to a temporary name beside `path`, then renames it.
@@ -289,7 +422,8 @@ fn write_json(path: &Path, doc: &serde_json::Value) -> Result<()> {
 
 /// Prints the figures; returns them as JSON.
 fn report(
-    args: &Args,
+    setting: &Setting,
+    seed: u64,
     models: &[Model],
     results: &[RegionResult],
     skipped: &[(u32, u32, Skip)],
@@ -310,17 +444,22 @@ fn report(
     let tiny: usize = models.iter().map(|m| m.seg.tiny).sum();
     println!(
         "bench select: {} models, {} regions evaluated ({} barely visible, {} under {:.0} % of \
-         the vertices left out); {}x{}, jitter {} px, heavy band {} px, seed {}",
+         the vertices left out); {}x{}, jitter {} px, heavy band {} px, markup {} + {} strokes \
+         ×{} long within {} px, seed {}",
         models.len(),
         results.len(),
         skipped.len(),
         tiny,
         MIN_REGION_SHARE * 100.0,
-        args.width,
-        args.height,
-        args.jitter,
-        args.band,
-        args.seed
+        setting.width,
+        setting.height,
+        setting.user.jitter,
+        setting.user.band,
+        setting.user.fg_strokes,
+        setting.user.bg_strokes,
+        setting.user.stroke_length,
+        setting.user.bg_reach,
+        seed
     );
     println!("  models       {}", names.join(", "));
     println!(

@@ -136,12 +136,37 @@ pub struct Strokes {
 }
 
 /// Settings of the simulated user.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct UserModel {
     /// Amplitude of the outline's jitter, pixels.
     pub jitter: f32,
     /// Width of the heavy lasso's band, pixels.
     pub band: f32,
+    /// Markup: foreground strokes.
+    pub fg_strokes: usize,
+    /// Markup: background strokes.
+    pub bg_strokes: usize,
+    /// Markup: stroke length, relative to the default (the square root of the area they are
+    /// drawn in, times 0.8, within 20–300 px); under 1, strokes that stop short.
+    pub stroke_length: f32,
+    /// Markup: how far beyond the region (and the heavy band's outer edge) the background
+    /// strokes may lie, pixels.
+    pub bg_reach: f32,
+}
+
+impl UserModel {
+    /// The default user: the given jitter and band, 3 foreground and 6 background strokes of
+    /// the default length within 80 px of the region.
+    pub fn new(jitter: f32, band: f32) -> UserModel {
+        UserModel {
+            jitter,
+            band,
+            fg_strokes: 3,
+            bg_strokes: 6,
+            stroke_length: 1.0,
+            bg_reach: 80.0,
+        }
+    }
 }
 
 /// The heavy band and the lasso along the jittered outline of `inside`, and the band's width.
@@ -220,7 +245,7 @@ pub fn draw(
             .map(|&d| d >= deepest * 0.6 && d > 0.0)
             .collect();
     }
-    let near = |d: f32| d < -away && d > -(away + 80.0);
+    let near = |d: f32| d < -away && d > -(away + user.bg_reach);
     let mut bg_area: Vec<bool> = (0..w * h)
         .map(|i| covered[i] && near(region_sd[i]))
         .collect();
@@ -237,14 +262,28 @@ pub fn draw(
     }
     let centre = ((cx / n.max(1) as f64) as f32, (cy / n.max(1) as f64) as f32);
     let mut markup = vec![mask::NONE; w * h];
-    let len =
-        |a: &[bool]| ((a.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0);
+    let len = |a: &[bool]| {
+        ((a.iter().filter(|&&b| b).count() as f32).sqrt() * 0.8).clamp(20.0, 300.0)
+            * user.stroke_length
+    };
     let (fg_len, bg_len) = (len(&fg_area), len(&bg_area));
     let mut paint = |area: &[bool], label, count, length, rng: &mut Rng| {
         strokes(&mut markup, area, label, count, length, centre, (w, h), rng)
     };
-    let markup_fg = paint(&fg_area, mask::FOREGROUND, 3, fg_len, rng);
-    let markup_bg = paint(&bg_area, mask::BACKGROUND, 6, bg_len, rng);
+    let markup_fg = paint(
+        &fg_area,
+        mask::FOREGROUND,
+        user.fg_strokes.max(1),
+        fg_len,
+        rng,
+    );
+    let markup_bg = paint(
+        &bg_area,
+        mask::BACKGROUND,
+        user.bg_strokes.max(1),
+        bg_len,
+        rng,
+    );
     Strokes {
         heavy_lasso,
         lasso,
@@ -359,10 +398,7 @@ mod tests {
         let (w, h) = (200, 160);
         let region = disc(w, h, 100.0, 80.0, 50.0);
         let covered = vec![true; w * h];
-        let user = UserModel {
-            jitter: 3.0,
-            band: 12.0,
-        };
+        let user = UserModel::new(3.0, 12.0);
         let s = draw(&region, &covered, w, h, user, &mut Rng::new(7, 1));
         assert_eq!(s.band_px, 12.0);
         // The lasso is the disc within the jitter.

@@ -26,6 +26,7 @@ use super::patch::{BuildPatch, ScratchFile, edge_ends};
 use super::simplify::{merge, simplify_group, split_tracked};
 use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink, SourceTexture, TexturedFace};
 use crate::progress::Progress;
+use crate::segment::{self, Collector, SegmentReport};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap as HashMap;
 use std::io;
@@ -86,6 +87,8 @@ pub struct BuildReport {
     pub stages: Vec<(String, f64)>,
     /// Peak resident memory of the process (VmHWM), if the platform reports it.
     pub peak_rss_bytes: Option<u64>,
+    /// Surface segments per scale, fine first (the `.mwseg` beside the output).
+    pub segments: Vec<u32>,
 }
 
 /// Why a build failed. Nothing is left at the output path in any case.
@@ -314,6 +317,8 @@ struct Builder<'a> {
     nodes: Vec<Node>,
     groups: Vec<Group>,
     stages: Vec<(String, f64)>,
+    /// The surface segments, written to the scratch directory with the leaves.
+    segments: Option<(PathBuf, SegmentReport)>,
 }
 
 impl<'a> Builder<'a> {
@@ -343,6 +348,7 @@ impl<'a> Builder<'a> {
             nodes: Vec::new(),
             groups: Vec::new(),
             stages,
+            segments: None,
         };
 
         // 2 + 3. Buckets and leaves.
@@ -364,6 +370,9 @@ impl<'a> Builder<'a> {
         // 5. Write.
         let t = Instant::now();
         let output_bytes = builder.write(output, &import, &roots)?;
+        if let Some((scratch_segments, _)) = &builder.segments {
+            place(scratch_segments, &segment::path_for(output))?;
+        }
         builder
             .stages
             .push(("write".to_string(), t.elapsed().as_secs_f64()));
@@ -389,6 +398,7 @@ impl<'a> Builder<'a> {
             seconds: started.elapsed().as_secs_f64(),
             stages: builder.stages,
             peak_rss_bytes: peak_rss_bytes(),
+            segments: builder.segments.map(|(_, r)| r.counts).unwrap_or_default(),
         })
     }
 
@@ -542,6 +552,12 @@ impl<'a> Builder<'a> {
         let _ = std::fs::remove_file(&ingested.faces_path);
         ingested.positions.release();
         self.progress.stage("partitioning", buckets.len() as u64);
+        let segments = Collector::new(
+            scratch,
+            ingested.positions.len(),
+            buckets.len(),
+            self.options.memory_budget,
+        )?;
 
         let arrays = &*ingested;
         let positions = arrays.positions.as_slice();
@@ -558,7 +574,8 @@ impl<'a> Builder<'a> {
         let results: Vec<Result<Vec<Stored>, BuildError>> = workers.install(|| {
             buckets
                 .par_iter()
-                .map(|bucket| {
+                .enumerate()
+                .map(|(index, bucket)| {
                     if this.progress.cancelled() {
                         return Err(BuildError::Cancelled);
                     }
@@ -566,6 +583,7 @@ impl<'a> Builder<'a> {
                     let _ = std::fs::remove_file(&bucket.path);
                     let mesh = bucket_mesh(&faces, positions, normals, colors);
                     drop(faces);
+                    segments.add(index, &mesh)?;
                     // Spilled vertex arrays give back the pages this bucket touched.
                     arrays.positions.release();
                     arrays.normals.release();
@@ -614,6 +632,12 @@ impl<'a> Builder<'a> {
         }
         self.raw.flush()?;
         self.atlases.flush()?;
+        let t = Instant::now();
+        let path = scratch.join("segments.mwseg");
+        let report = segments.finish(&path)?;
+        self.stages
+            .push(("segments".to_string(), t.elapsed().as_secs_f64()));
+        self.segments = Some((path, report));
         Ok(pool)
     }
 
@@ -1034,6 +1058,19 @@ fn bucket_mesh(
         .collect();
     mesh.ids = ids;
     mesh
+}
+
+/// Moves a finished file from the scratch directory to `to` (renamed when on the same file
+/// system, else copied under a temporary name and renamed).
+fn place(from: &Path, to: &Path) -> io::Result<()> {
+    if std::fs::rename(from, to).is_ok() {
+        return Ok(());
+    }
+    let tmp = super::format::temp_path(to);
+    std::fs::copy(from, &tmp)?;
+    std::fs::rename(&tmp, to).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
 }
 
 /// Border vertices (or a few samples when there is no border) for grouping.

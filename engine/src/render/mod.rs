@@ -26,6 +26,7 @@ pub use highlight::Highlight;
 
 use crate::camera::{Camera, CameraError};
 use crate::lod::{Culling, FormatError, LodFile, cut};
+use crate::segment::SegmentFile;
 use cache::{GpuPatch, Key, PatchCache};
 use glam::Vec3;
 use highlight::Prepared;
@@ -70,12 +71,31 @@ pub enum RenderError {
     Gpu(String),
 }
 
+/// The segments beside the LOD file at `lod` (`.mwseg`), if there is a valid one for it; a
+/// missing file is normal (models built before segments), an invalid one is logged and
+/// ignored (selection then works on the pixels alone).
+pub fn open_segments(lod: &Path) -> Option<Arc<SegmentFile>> {
+    let path = crate::segment::path_for(lod);
+    if !path.exists() {
+        return None;
+    }
+    match SegmentFile::open(&path) {
+        Ok(f) => Some(Arc::new(f)),
+        Err(e) => {
+            tracing::warn!(path = %path.display(), error = %e, "segment file ignored");
+            None
+        }
+    }
+}
+
 /// A model the renderer can draw: an open LOD file and a process-unique id (its cache key).
 #[derive(Clone)]
 pub struct RenderModel {
     id: u64,
     lod: Arc<LodFile>,
     radius: f32,
+    /// The surface segments of the scan, when its build made them.
+    segments: Option<Arc<SegmentFile>>,
 }
 
 static NEXT_MODEL: AtomicU64 = AtomicU64::new(1);
@@ -98,12 +118,25 @@ impl RenderModel {
             id: NEXT_MODEL.fetch_add(1, Ordering::Relaxed),
             lod,
             radius,
+            segments: None,
         }
     }
 
-    /// Opens (maps and validates) a `.mwlod` file.
+    /// The model with its surface segments.
+    pub fn with_segments(mut self, segments: Option<Arc<SegmentFile>>) -> RenderModel {
+        self.segments = segments;
+        self
+    }
+
+    /// The surface segments, if the model has them.
+    pub fn segments(&self) -> Option<&SegmentFile> {
+        self.segments.as_deref()
+    }
+
+    /// Opens (maps and validates) a `.mwlod` file, and the segments beside it when there are
+    /// any ([`open_segments`]).
     pub fn open(path: &Path) -> Result<RenderModel, FormatError> {
-        Ok(RenderModel::new(Arc::new(LodFile::open(path)?)))
+        Ok(RenderModel::new(Arc::new(LodFile::open(path)?)).with_segments(open_segments(path)))
     }
 
     pub fn id(&self) -> u64 {

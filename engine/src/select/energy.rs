@@ -62,6 +62,18 @@ pub struct EnergyParams {
     /// Markup only: λ of markup, whose data term also carries the stroke distance and so
     /// balances against a stronger smoothness term than the heavy lasso's.
     pub markup_lambda: f32,
+    /// Models with surface segments: weight of the segment prior, how strongly a pixel in a
+    /// segment claimed by one side's strokes leans to that side ([`super::segments`]).
+    /// 0 disables it.
+    pub w_seg: f32,
+    /// Markup on models with surface segments: how strongly a pixel in no segment claimed by
+    /// a stroke leans to the background (markup selects what its strokes claim, it does not
+    /// spread over the surface no stroke speaks for). 0 disables it.
+    pub w_seg_out: f32,
+    /// Models with surface segments: factor of the smoothness term between pixels of
+    /// different stroke segments (1: segment boundaries are no cheaper to cut than anywhere
+    /// else; towards 0: the cut follows them).
+    pub seg_edge: f32,
 }
 
 impl Default for EnergyParams {
@@ -75,6 +87,9 @@ impl Default for EnergyParams {
             band_prior: 0.25,
             w_geo: 4.0,
             markup_lambda: 6.0,
+            w_seg: 2.0,
+            w_seg_out: 1.0,
+            seg_edge: 0.5,
         }
     }
 }
@@ -93,6 +108,9 @@ impl EnergyParams {
             ("band_prior", self.band_prior),
             ("w_geo", self.w_geo),
             ("markup_lambda", self.markup_lambda),
+            ("w_seg", self.w_seg),
+            ("w_seg_out", self.w_seg_out),
+            ("seg_edge", self.seg_edge),
         ];
         for (name, v) in w {
             if !(v.is_finite() && (0.0..=1e4).contains(&v)) {

@@ -133,6 +133,14 @@ pub fn graph_cut(
                         cf += params.w_geo * pos[g];
                         cb += params.w_geo * (1.0 - pos[g]);
                     }
+                    if let Some(p) = &seeds.segments {
+                        match p.side[g] {
+                            1 => cb += params.w_seg,
+                            -1 => cf += params.w_seg,
+                            _ if seeds.stroke_position.is_some() => cf += params.w_seg_out,
+                            _ => {}
+                        }
+                    }
                     // Cutting the source link puts the pixel in the background.
                     source[l] = cb;
                     sink[l] = cf;
@@ -149,6 +157,12 @@ pub fn graph_cut(
                 let rq = seeds.role[q];
                 if rq == OFF || (rq == role && role != UNKNOWN) {
                     return;
+                }
+                let mut factor = factor;
+                if let Some(p) = &seeds.segments
+                    && p.region[g] != p.region[q]
+                {
+                    factor *= params.seg_edge;
                 }
                 arr[l] = factor * smooth.edge(buffers, g, q);
             };

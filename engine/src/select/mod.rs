@@ -6,6 +6,8 @@
 //! - [`buffers`]: the rendered colour, normal, depth and id buffers the cut runs on.
 //! - [`seeds`]: seeds of each tool — markup strokes (Lazy Snapping), the heavy lasso's inner and
 //!   outer markers (§4.2), the plain lasso's polygon.
+//! - [`segments`]: the model's surface segments in the cut (stroke segments: a prior and
+//!   cheap cuts on segment boundaries).
 //! - [`energy`]: the data term (eq. 2–3) and the smoothness term (eq. 4).
 //! - [`graph_cut`]: the graph over covered pixels, 8-connected, solved by Boykov–Kolmogorov max-flow
 //!   ([`maxflow_grid`]) (eq. 1).
@@ -28,6 +30,7 @@ pub mod on_view;
 pub mod pipeline;
 pub mod point;
 pub mod seeds;
+pub mod segments;
 
 pub use backproject::{BackProjectOptions, BackProjection, back_project};
 pub use buffers::Buffers;

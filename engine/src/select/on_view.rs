@@ -16,6 +16,7 @@ use super::graph_cut::CutStats;
 use super::mask::{self, StrokeMask};
 use super::pipeline::{Tool, select_pixels};
 use super::point::{self, PickedPoint};
+use super::segments::ViewSegments;
 use crate::camera::Camera;
 use crate::lod::Culling;
 use crate::render::{Cut, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
@@ -71,15 +72,14 @@ pub enum ViewSelectError {
 /// Pixels kept around the strokes' bounding box (the heavy lasso's outer marker needs the
 /// area outside its band to be seen from the window's border).
 const WINDOW_MARGIN: u32 = 2;
-/// Markup's window: its strokes' bounding box grown by this share of its larger side.
-const MARKUP_MARGIN: f32 = 0.5;
 /// Half the side of the square drawn around a click.
 const CLICK_RADIUS: u32 = 4;
 
 /// The part of the view a selection reads, `[x, y, width, height]` (`None`: all of it). The
 /// lasso selects only inside its outline and the heavy lasso's cut only decides its band, so
 /// both need only their strokes' bounding box (plus [`WINDOW_MARGIN`]); a click needs its
-/// pixel. Markup's cut decides every pixel of the view: it reads the whole view. Inside the
+/// pixel. Markup's cut decides every pixel of the view (a short stroke may claim a part much
+/// larger than the strokes' box): it reads the whole view. Inside the
 /// window the buffers are those of the whole view (the same cut, drawn with an off-centre
 /// crop of the same projection), so the selection is the same.
 fn window(input: &Input<'_>, camera: &Camera) -> Option<[u32; 4]> {
@@ -101,7 +101,7 @@ fn window(input: &Input<'_>, camera: &Camera) -> Option<[u32; 4]> {
             square(x, y, x, y, CLICK_RADIUS)
         }
         Input::Strokes { tool, mask, .. } => {
-            if mask.width != w || mask.height != h {
+            if mask.width != w || mask.height != h || tool == Tool::Markup {
                 return None;
             }
             let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
@@ -112,15 +112,8 @@ fn window(input: &Input<'_>, camera: &Camera) -> Option<[u32; 4]> {
                 x1 = x1.max(x);
                 y1 = y1.max(y);
             }
-            let margin = if tool == Tool::Markup {
-                // Markup's cut decides every pixel: what lies well beyond the strokes (farther
-                // from the foreground than the background strokes around it) stays out.
-                ((x1 - x0).max(y1 - y0) as f32 * MARKUP_MARGIN) as u32 + WINDOW_MARGIN
-            } else {
-                WINDOW_MARGIN
-            };
             (x0 != u32::MAX)
-                .then(|| square(x0, y0, x1, y1, margin))
+                .then(|| square(x0, y0, x1, y1, WINDOW_MARGIN))
                 .flatten()
         }
     }
@@ -175,7 +168,10 @@ pub fn select_on_view(
         }
         Input::Strokes { tool, mask, params } => {
             let color_cue = model.lod().has_colors();
-            let sel = select_pixels(tool, mask, &buffers, params, color_cue)?;
+            let segments = model
+                .segments()
+                .map(|file| ViewSegments::of(file, &buffers));
+            let sel = select_pixels(tool, mask, &buffers, params, color_cue, segments.as_ref())?;
             let cut_ms = t.elapsed().as_secs_f64() * 1e3;
             let backprojection = back_project(
                 model.lod(),

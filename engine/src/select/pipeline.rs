@@ -8,6 +8,7 @@ use super::energy::EnergyParams;
 use super::graph_cut::{self, CutStats};
 use super::mask::StrokeMask;
 use super::seeds;
+use super::segments::{ViewSegments, stroke_segments};
 
 /// The selection tools.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -47,13 +48,15 @@ pub struct PixelSelection {
 }
 
 /// Runs `tool` on the strokes of `mask` over the rendered `buffers`. `color_cue`: whether the
-/// model has colours (see [`graph_cut::graph_cut`]).
+/// model has colours (see [`graph_cut::graph_cut`]); `segments`: the view's surface segments,
+/// when the model has them ([`super::segments`]).
 pub fn select_pixels(
     tool: Tool,
     mask: &StrokeMask,
     buffers: &Buffers<'_>,
     params: &EnergyParams,
     color_cue: bool,
+    segments: Option<&ViewSegments>,
 ) -> Result<PixelSelection, SelectError> {
     buffers.check()?;
     params.validate()?;
@@ -74,11 +77,14 @@ pub fn select_pixels(
     let (selected, cut, seeds_ms) = match tool {
         Tool::Lasso => (seeds::lasso(mask, buffers)?, None, ms(started)),
         Tool::Markup | Tool::HeavyLasso => {
-            let s = if tool == Tool::Markup {
+            let mut s = if tool == Tool::Markup {
                 seeds::markup(mask, buffers)?
             } else {
                 seeds::heavy_lasso(mask, buffers)?
             };
+            if let Some(view) = segments {
+                s.segments = Some(stroke_segments(view, &s));
+            }
             let seeds_ms = ms(started);
             let (mut selected, stats) = graph_cut::graph_cut(buffers, &s, params, color_cue)?;
             graph_cut::keep_connected_to_seeds(&mut selected, &s);
@@ -126,7 +132,15 @@ mod tests {
             }
         }
         let v = b.view();
-        let sel = select_pixels(Tool::HeavyLasso, &m, &v, &EnergyParams::default(), false).unwrap();
+        let sel = select_pixels(
+            Tool::HeavyLasso,
+            &m,
+            &v,
+            &EnergyParams::default(),
+            false,
+            None,
+        )
+        .unwrap();
         let wrong = (0..(w * h) as usize)
             .filter(|&i| {
                 let (x, y) = ((i % w as usize) as f32 + 0.5, (i / w as usize) as f32 + 0.5);
@@ -150,7 +164,15 @@ mod tests {
             }
         }
         let v = b.view();
-        let sel = select_pixels(Tool::HeavyLasso, &m, &v, &EnergyParams::default(), false).unwrap();
+        let sel = select_pixels(
+            Tool::HeavyLasso,
+            &m,
+            &v,
+            &EnergyParams::default(),
+            false,
+            None,
+        )
+        .unwrap();
         // The middle circle (r = 15) has area ≈ 707 pixels.
         let area = std::f32::consts::PI * 15.0 * 15.0;
         assert!(
@@ -166,13 +188,27 @@ mod tests {
         b.node.iter_mut().for_each(|n| *n = crate::render::NO_NODE);
         let m = StrokeMask::new(8, 8, vec![mask::LASSO; 64]).unwrap();
         assert_eq!(
-            select_pixels(Tool::Lasso, &m, &b.view(), &EnergyParams::default(), false),
+            select_pixels(
+                Tool::Lasso,
+                &m,
+                &b.view(),
+                &EnergyParams::default(),
+                false,
+                None
+            ),
             Err(SelectError::NothingVisible)
         );
         let b = OwnedBuffers::flat(8, 8);
         let m = StrokeMask::new(4, 4, vec![mask::LASSO; 16]).unwrap();
         assert!(matches!(
-            select_pixels(Tool::Lasso, &m, &b.view(), &EnergyParams::default(), false),
+            select_pixels(
+                Tool::Lasso,
+                &m,
+                &b.view(),
+                &EnergyParams::default(),
+                false,
+                None
+            ),
             Err(SelectError::SizeMismatch { .. })
         ));
     }

@@ -49,6 +49,8 @@ pub struct Seeds {
     /// Markup: relative geodesic distance to the strokes per pixel, `D^F / (D^F + D^B)`
     /// (0 on a foreground stroke … 1 on a background stroke; see [`geodesic_from`]).
     pub stroke_position: Option<Vec<f32>>,
+    /// The stroke segments, when the model has surface segments ([`super::segments`]).
+    pub segments: Option<super::segments::SegmentPrior>,
 }
 
 impl Seeds {
@@ -390,6 +392,7 @@ pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectE
         fg_samples: fg,
         bg_samples: bg,
         band_position: None,
+        segments: None,
     })
 }
 
@@ -576,6 +579,7 @@ pub fn heavy_lasso(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, Se
         bg_samples: bg,
         band_position: Some(position),
         stroke_position: None,
+        segments: None,
     })
 }
 

@@ -1,0 +1,212 @@
+//! Surface segments during the out-of-core build: each bucket's fine segments
+//! ([`super::grow`]) are gathered as the leaves are made, numbered in bucket order, joined
+//! across bucket borders and merged into scales ([`super::merge`]), then written as the
+//! model's `.mwseg` ([`super::file`]).
+//!
+//! Memory: per vertex, the segment map lives in a memory-mapped scratch file (8 bytes a
+//! vertex, in the page cache); in memory are only per-segment sums, boundaries and the
+//! buckets' border vertices. A vertex on a bucket border keeps the segment of the lowest
+//! bucket, so the file is the same whatever the order in which buckets finish.
+
+use std::fs::File;
+use std::io;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use memmap2::MmapMut;
+
+use super::grow::{Boundary, BucketSegments, GrowParams, SegmentSums, grow};
+use super::merge::{MergeParams, merge};
+use crate::lod::patch::BuildPatch;
+
+/// What a bucket keeps until the end of the build.
+#[derive(Debug, Default)]
+struct Summary {
+    sums: Vec<SegmentSums>,
+    boundaries: Vec<(u32, u32, Boundary)>,
+    border: Vec<(u32, u32)>,
+}
+
+/// Figures of the segmentation, for the build report.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SegmentReport {
+    /// Segments per scale, fine first.
+    pub counts: Vec<u32>,
+    /// Bytes of the `.mwseg` file.
+    pub bytes: u64,
+}
+
+/// Gathers the buckets' segments during a build.
+pub struct Collector {
+    path: PathBuf,
+    vertices: usize,
+    /// Per vertex `bucket << 32 | local segment`, `u64::MAX` when not seen yet.
+    map: Mutex<Option<MmapMut>>,
+    summaries: Mutex<Vec<Summary>>,
+    params: GrowParams,
+}
+
+const UNSEEN: u64 = u64::MAX;
+
+/// Bytes of the merge's working set per fine segment (sums, adjacency, heap entries).
+const BYTES_PER_SEGMENT: usize = 512;
+
+/// The most vertices of a fine segment: [`GrowParams::default`]'s (small superpixels, so
+/// the hierarchy, not the region growing, decides where parts meet), larger on scans whose
+/// fine segments would not fit a quarter of `memory_budget` in the global merge.
+fn fine_size(vertices: usize, memory_budget: usize) -> usize {
+    let fit = (memory_budget / 4 / BYTES_PER_SEGMENT).max(1);
+    GrowParams::default()
+        .max_vertices
+        .max(vertices.div_ceil(fit))
+}
+
+impl Collector {
+    /// A collector for `vertices` original vertices and `buckets` buckets, its scratch file
+    /// in `scratch`, the merge's working set within a quarter of `memory_budget` bytes.
+    pub fn new(
+        scratch: &Path,
+        vertices: usize,
+        buckets: usize,
+        memory_budget: usize,
+    ) -> io::Result<Collector> {
+        let path = scratch.join("segments.map");
+        let map = if vertices == 0 {
+            None
+        } else {
+            let file = File::options()
+                .create(true)
+                .truncate(true)
+                .read(true)
+                .write(true)
+                .open(&path)?;
+            file.set_len(vertices as u64 * 8)?;
+            // SAFETY: the scratch file is private to this build and never truncated while
+            // mapped.
+            let mut map = unsafe { MmapMut::map_mut(&file)? };
+            map.fill(0xFF);
+            Some(map)
+        };
+        Ok(Collector {
+            path,
+            vertices,
+            map: Mutex::new(map),
+            summaries: Mutex::new((0..buckets).map(|_| Summary::default()).collect()),
+            params: GrowParams {
+                max_vertices: fine_size(vertices, memory_budget),
+                ..GrowParams::default()
+            },
+        })
+    }
+
+    /// Segments bucket number `bucket`, whose mesh is `mesh` (original ids in `mesh.ids`).
+    pub fn add(&self, bucket: usize, mesh: &BuildPatch) -> io::Result<()> {
+        let BucketSegments {
+            vertex_segment,
+            sums,
+            boundaries,
+            border,
+        } = grow(mesh, &self.params);
+        {
+            let mut guard = self
+                .map
+                .lock()
+                .map_err(|_| io::Error::other("segment map lock poisoned"))?;
+            if let Some(map) = guard.as_mut() {
+                let slots: &mut [u64] = bytemuck::cast_slice_mut(&mut map[..]);
+                for (&id, &s) in mesh.ids.iter().zip(&vertex_segment) {
+                    let packed = (bucket as u64) << 32 | s as u64;
+                    if let Some(slot) = slots.get_mut(id as usize)
+                        && (*slot == UNSEEN || packed < *slot)
+                    {
+                        *slot = packed;
+                    }
+                }
+            }
+        }
+        let mut summaries = self
+            .summaries
+            .lock()
+            .map_err(|_| io::Error::other("segment summaries lock poisoned"))?;
+        if let Some(s) = summaries.get_mut(bucket) {
+            *s = Summary {
+                sums,
+                boundaries,
+                border,
+            };
+        }
+        Ok(())
+    }
+
+    /// Numbers, joins and merges the segments and writes the `.mwseg` file to `out`.
+    pub fn finish(self, out: &Path) -> io::Result<SegmentReport> {
+        let summaries = self
+            .summaries
+            .into_inner()
+            .map_err(|_| io::Error::other("segment summaries lock poisoned"))?;
+        let map = self
+            .map
+            .into_inner()
+            .map_err(|_| io::Error::other("segment map lock poisoned"))?;
+        // Global numbers: buckets in order.
+        let mut base = Vec::with_capacity(summaries.len());
+        let mut total = 0u32;
+        for s in &summaries {
+            base.push(total);
+            total = total.saturating_add(s.sums.len() as u32);
+        }
+        let mut sums = Vec::with_capacity(total as usize);
+        let mut boundaries = Vec::new();
+        let mut border = Vec::new();
+        for (b, s) in summaries.into_iter().enumerate() {
+            sums.extend(s.sums);
+            boundaries.extend(
+                s.boundaries
+                    .into_iter()
+                    .map(|(x, y, bd)| (x + base[b], y + base[b], bd)),
+            );
+            border.extend(s.border.into_iter().map(|(id, x)| (id, x + base[b])));
+        }
+        // Joins: one vertex in several buckets.
+        border.sort_unstable();
+        for w in border.windows(2) {
+            if w[0].0 == w[1].0 && w[0].1 != w[1].1 {
+                let join = Boundary {
+                    joins: 1,
+                    ..Boundary::default()
+                };
+                boundaries.push((w[0].1, w[1].1, join));
+            }
+        }
+        drop(border);
+        let hierarchy = merge(sums, boundaries, &MergeParams::default());
+        let fine_of = |packed: u64| {
+            if packed == UNSEEN {
+                super::file::NONE
+            } else {
+                base.get((packed >> 32) as usize)
+                    .map_or(super::file::NONE, |&b| b + packed as u32)
+            }
+        };
+        match &map {
+            Some(m) => {
+                let slots: &[u64] = bytemuck::cast_slice(&m[..]);
+                super::file::write(
+                    out,
+                    &hierarchy,
+                    self.vertices as u64,
+                    slots.iter().map(|&p| fine_of(p)),
+                )?;
+            }
+            None => super::file::write(out, &hierarchy, 0, std::iter::empty())?,
+        }
+        drop(map);
+        let _ = std::fs::remove_file(&self.path);
+        let mut counts = vec![hierarchy.fine];
+        counts.extend(&hierarchy.counts);
+        Ok(SegmentReport {
+            counts,
+            bytes: std::fs::metadata(out)?.len(),
+        })
+    }
+}

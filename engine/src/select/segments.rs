@@ -1,0 +1,265 @@
+//! Surface segments in the graph cut (issue 13; Lazy Snapping's pre-segmentation, with the
+//! mesh-segmentation paper's surface segments in place of image superpixels): a second level
+//! above the pixels.
+//!
+//! Each pixel names an original vertex (the id buffer), hence its segment at every scale of
+//! the model's hierarchy ([`crate::segment`]). The strokes then claim whole segments: going
+//! up the hierarchy from each fine segment a stroke touches, through the segments that hold
+//! strokes of that side only, the stroke claims the one **whose boundary is strongest** (the
+//! most salient part: it was merged last relative to what it holds, see
+//! [`crate::segment::merge::Hierarchy::strengths`]) — not simply the largest, which with
+//! few strokes would be half the model. Segments no stroke claims stay undecided. These
+//! *stroke segments* act on the cut in two ways:
+//!
+//! - a **segment prior** in the data term: a pixel in a foreground stroke segment costs
+//!   `w_seg` more to put in the background, and the converse — so a stroke claims the
+//!   surface up to the nearest segment boundary that separates it from the other side's
+//!   strokes, instead of leaking across a smooth join;
+//! - **cheap cuts on segment boundaries**: between two pixels of different stroke segments
+//!   the smoothness term is multiplied by `seg_edge` (< 1), so the cut snaps to them; the
+//!   pixel graph still refines the boundary where the image says otherwise.
+//!
+//! The seeds' foreground and background pixels are the strokes: markup's strokes, and the
+//! heavy lasso's inner and outer sides.
+
+use rustc_hash::FxHashMap;
+
+use super::buffers::Buffers;
+use super::seeds::{BG, FG, OFF, Seeds};
+use crate::segment::SegmentFile;
+
+/// No segment (off the model, or a vertex the file does not know).
+pub const NONE: u32 = u32::MAX;
+
+/// The segments of one view's pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewSegments {
+    pub width: u32,
+    pub height: u32,
+    /// Per pixel, its fine segment numbered locally (`0..ladders.len()`), or [`NONE`].
+    pub local: Vec<u32>,
+    /// Per local fine segment, its segment at every scale, fine (0) to coarsest.
+    pub ladders: Vec<Vec<u32>>,
+    /// Per local fine segment, the strength of each of those segments.
+    pub strengths: Vec<Vec<f32>>,
+}
+
+impl ViewSegments {
+    /// Looks up every pixel's segments in `file`.
+    pub fn of(file: &SegmentFile, buffers: &Buffers<'_>) -> ViewSegments {
+        let scales = file.scales();
+        let mut index: FxHashMap<u32, u32> = FxHashMap::default();
+        let mut ladders = Vec::new();
+        let mut strengths = Vec::new();
+        let local = (0..buffers.len())
+            .map(|i| {
+                if !buffers.covered(i) {
+                    return NONE;
+                }
+                let Some(fine) = file.fine_of(buffers.vertex[i]) else {
+                    return NONE;
+                };
+                *index.entry(fine).or_insert_with(|| {
+                    let ladder: Vec<u32> = (0..scales)
+                        .map(|s| file.at_scale(s, fine).unwrap_or(NONE))
+                        .collect();
+                    strengths.push(
+                        ladder
+                            .iter()
+                            .enumerate()
+                            .map(|(s, &seg)| file.strength(s, seg))
+                            .collect(),
+                    );
+                    ladders.push(ladder);
+                    (ladders.len() - 1) as u32
+                })
+            })
+            .collect();
+        ViewSegments {
+            width: buffers.width,
+            height: buffers.height,
+            local,
+            ladders,
+            strengths,
+        }
+    }
+
+    /// Per pixel, its segment at `scale` ([`NONE`] where none).
+    pub fn at_scale(&self, scale: usize) -> Vec<u32> {
+        self.local
+            .iter()
+            .map(|&l| {
+                if l == NONE {
+                    NONE
+                } else {
+                    self.ladders[l as usize].get(scale).copied().unwrap_or(NONE)
+                }
+            })
+            .collect()
+    }
+}
+
+/// The stroke segments of a view ([`stroke_segments`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentPrior {
+    /// Per pixel: +1 in a foreground stroke segment, −1 in a background one, 0 otherwise.
+    pub side: Vec<i8>,
+    /// Per pixel, the stroke segment (or the largest stroke-free segment) it lies in, as
+    /// `scale << 32 | segment`; `u64::MAX` where none.
+    pub region: Vec<u64>,
+}
+
+/// The largest segments holding strokes of one side only, from the seeds' foreground and
+/// background pixels.
+pub fn stroke_segments(view: &ViewSegments, seeds: &Seeds) -> SegmentPrior {
+    let n = view.local.len();
+    let scales = view.ladders.first().map_or(0, Vec::len);
+    // Stroke pixels per (scale, segment): (foreground, background).
+    let mut count: FxHashMap<(usize, u32), (u32, u32)> = FxHashMap::default();
+    let mut local_count: Vec<(u32, u32)> = vec![(0, 0); view.ladders.len()];
+    for i in 0..n.min(seeds.role.len()) {
+        let l = view.local[i];
+        if l == NONE {
+            continue;
+        }
+        match seeds.role[i] {
+            FG => local_count[l as usize].0 += 1,
+            BG => local_count[l as usize].1 += 1,
+            _ => {}
+        }
+    }
+    for (l, &(f, b)) in local_count.iter().enumerate() {
+        if f == 0 && b == 0 {
+            continue;
+        }
+        for (s, &seg) in view.ladders[l].iter().enumerate() {
+            let c = count.entry((s, seg)).or_default();
+            c.0 += f;
+            c.1 += b;
+        }
+    }
+    let key = |s: usize, seg: u32| (s as u64) << 32 | seg as u64;
+    // The segments the strokes claim: from each fine segment with strokes, up through the
+    // segments of its side only, the one with the strongest boundary (the larger on a tie).
+    let mut claimed: FxHashMap<u64, i8> = FxHashMap::default();
+    for (l, ladder) in view.ladders.iter().enumerate() {
+        let (f, b) = local_count[l];
+        if (f > 0) == (b > 0) {
+            continue;
+        }
+        let side: i8 = if f > 0 { 1 } else { -1 };
+        let mut best: Option<(f32, u64)> = None;
+        for (s, &seg) in ladder.iter().enumerate().take(scales) {
+            if seg == NONE {
+                break;
+            }
+            let (f, b) = count.get(&(s, seg)).copied().unwrap_or((0, 0));
+            if f > 0 && b > 0 {
+                break;
+            }
+            let strength = view.strengths[l].get(s).copied().unwrap_or(f32::INFINITY);
+            if best.is_none_or(|(bs, _)| strength >= bs) {
+                best = Some((strength, key(s, seg)));
+            }
+        }
+        if let Some((_, k)) = best {
+            claimed.insert(k, side);
+        }
+    }
+    // Per local fine segment: its claimed segment, or else its largest segment without
+    // strokes (for the boundaries).
+    let decided: Vec<(i8, u64)> = view
+        .ladders
+        .iter()
+        .map(|ladder| {
+            let mut free = u64::MAX;
+            for (s, &seg) in ladder.iter().enumerate().take(scales) {
+                if seg == NONE {
+                    break;
+                }
+                if let Some(&side) = claimed.get(&key(s, seg)) {
+                    return (side, key(s, seg));
+                }
+                if !count.contains_key(&(s, seg)) {
+                    free = key(s, seg);
+                }
+            }
+            (0, free)
+        })
+        .collect();
+    let mut side = vec![0i8; n];
+    let mut region = vec![u64::MAX; n];
+    for i in 0..n {
+        let l = view.local[i];
+        if l == NONE || seeds.role.get(i) == Some(&OFF) {
+            continue;
+        }
+        (side[i], region[i]) = decided[l as usize];
+    }
+    SegmentPrior { side, region }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::select::seeds::UNKNOWN;
+
+    /// A 12 × 1 view of four fine segments (three pixels each), merged pairwise at scale 1
+    /// and into one at scale 2.
+    fn view() -> ViewSegments {
+        ViewSegments {
+            width: 12,
+            height: 1,
+            local: (0..12).map(|i| i / 3).collect(),
+            ladders: vec![
+                vec![10, 0, 0],
+                vec![11, 0, 0],
+                vec![12, 1, 0],
+                vec![13, 1, 0],
+            ],
+            strengths: vec![vec![0.1, 1.0, f32::INFINITY]; 4],
+        }
+    }
+
+    fn seeds(role: Vec<u8>) -> Seeds {
+        Seeds {
+            width: role.len() as u32,
+            height: 1,
+            role,
+            fg_samples: Vec::new(),
+            bg_samples: Vec::new(),
+            band_position: None,
+            stroke_position: None,
+            segments: None,
+        }
+    }
+
+    #[test]
+    fn a_stroke_claims_its_most_salient_segment_without_the_other_side() {
+        let mut role = vec![UNKNOWN; 12];
+        role[0] = FG;
+        role[11] = BG;
+        let p = stroke_segments(&view(), &seeds(role));
+        // Scale 2 holds both; scale 1 splits them: two halves, one per side.
+        assert_eq!(&p.side[..6], &[1; 6]);
+        assert_eq!(&p.side[6..], &[-1; 6]);
+        assert_eq!(p.region[0], 1 << 32);
+        assert_eq!(p.region[5], 1 << 32);
+        assert_eq!(p.region[6], (1 << 32) | 1);
+    }
+
+    #[test]
+    fn segments_without_strokes_stay_undecided() {
+        let mut role = vec![UNKNOWN; 12];
+        role[0] = FG;
+        role[4] = BG;
+        let p = stroke_segments(&view(), &seeds(role));
+        // Fine segments 0 and 1 are separated at scale 0 only; 2 and 3 have no strokes and
+        // their scale-1 segment none either.
+        assert_eq!(&p.side[..3], &[1; 3]);
+        assert_eq!(&p.side[3..6], &[-1; 3]);
+        assert_eq!(&p.side[6..], &[0; 6]);
+        assert_eq!(p.region[0], 10);
+        assert_eq!(p.region[6], (1 << 32) | 1);
+    }
+}
