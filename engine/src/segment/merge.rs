@@ -70,9 +70,6 @@ struct Candidate {
     cost: f64,
     a: u32,
     b: u32,
-    /// Versions of `a` and `b` when the cost was computed.
-    va: u32,
-    vb: u32,
 }
 
 impl Eq for Candidate {}
@@ -142,7 +139,6 @@ pub fn merge(
         adjacency[b as usize].entry(a).or_default().add(&bd);
     }
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    let mut version = vec![0u32; n];
     let mut heap = BinaryHeap::new();
     for a in 0..n {
         for (&b, bd) in &adjacency[a] {
@@ -151,8 +147,6 @@ pub fn merge(
                     cost: cost(&sums[a], &sums[b as usize], bd, params).0,
                     a: a as u32,
                     b,
-                    va: 0,
-                    vb: 0,
                 });
             }
         }
@@ -194,13 +188,20 @@ pub fn merge(
     while live > 1 {
         let Some(c) = heap.pop() else { break };
         let (a, b) = (c.a as usize, c.b as usize);
-        if parent[a] != c.a || parent[b] != c.b || version[a] != c.va || version[b] != c.vb {
+        if parent[a] != c.a || parent[b] != c.b {
+            continue;
+        }
+        // A candidate is current while its cost is (a changed pair was pushed again).
+        let Some((current, strength)) = adjacency[a]
+            .get(&c.b)
+            .map(|bd| cost(&sums[a], &sums[b], bd, params))
+        else {
+            continue;
+        };
+        if current.to_bits() != c.cost.to_bits() {
             continue;
         }
         // The two segments end here.
-        let strength = adjacency[a]
-            .get(&c.b)
-            .map_or(f64::INFINITY, |bd| cost(&sums[a], &sums[b], bd, params).1);
         for r in [a, b] {
             for (scale, label) in open[r].drain(..) {
                 hierarchy.strengths[scale as usize][label as usize] = (strength - inner[r]) as f32;
@@ -215,10 +216,11 @@ pub fn merge(
         };
         parent[gone] = keep as u32;
         inner[keep] = merged_inner;
+        let keep_before = sums[keep].vertices;
         let gone_sums = sums[gone];
         sums[keep].add(&gone_sums);
-        version[keep] += 1;
         let moved = std::mem::take(&mut adjacency[gone]);
+        let mut changed: Vec<u32> = moved.keys().copied().collect();
         adjacency[keep].remove(&(gone as u32));
         for (other, bd) in moved {
             if other as usize == keep {
@@ -229,18 +231,30 @@ pub fn merge(
             o.entry(keep as u32).or_default().add(&bd);
             adjacency[keep].entry(other).or_default().add(&bd);
         }
-        for (&other, bd) in &adjacency[keep] {
+        // New costs: pairs whose boundary changed (the neighbours of `gone`), and those whose
+        // smaller side was `keep` (or all, when mean normals weigh); the others' entries stay
+        // current.
+        changed.extend(
+            adjacency[keep]
+                .keys()
+                .copied()
+                .filter(|&o| params.normal != 0.0 || sums[o as usize].vertices > keep_before),
+        );
+        changed.sort_unstable();
+        changed.dedup();
+        for other in changed {
+            let Some(bd) = adjacency[keep].get(&other) else {
+                continue;
+            };
             let (x, y) = if (keep as u32) < other {
                 (keep as u32, other)
             } else {
                 (other, keep as u32)
             };
             heap.push(Candidate {
-                cost: cost(&sums[keep], &sums[other as usize], bd, params).0,
+                cost: cost(&sums[x as usize], &sums[y as usize], bd, params).0,
                 a: x,
                 b: y,
-                va: version[x as usize],
-                vb: version[y as usize],
             });
         }
         live -= 1;
