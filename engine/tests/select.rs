@@ -18,7 +18,6 @@ use meshwiki_engine::render::{
 };
 use meshwiki_engine::select::mask::{self, StrokeMask};
 use meshwiki_engine::select::modes::{self, Mode, VertexSet};
-use meshwiki_engine::select::segments::ViewSegments;
 use meshwiki_engine::select::{
     BackProjectOptions, BackProjection, Buffers, EnergyParams, Tool, back_project, point,
     select_pixels,
@@ -162,15 +161,14 @@ fn select_vertices(
     strokes: &StrokeMask,
     base: Option<&RoaringBitmap>,
 ) -> BackProjection {
-    // The model's surface segments, as the server uses them.
-    let segments = p.model.segments().map(|f| ViewSegments::of(f, buffers));
+    // With the model's surface segments, as the server uses them.
     let sel = select_pixels(
         tool,
         strokes,
         buffers,
         &EnergyParams::default(),
         false,
-        segments.as_ref(),
+        p.model.segments(),
     )
     .unwrap();
     back_project(

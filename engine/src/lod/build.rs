@@ -26,7 +26,7 @@ use super::patch::{BuildPatch, ScratchFile, edge_ends};
 use super::simplify::{merge, simplify_group, split_tracked};
 use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink, SourceTexture, TexturedFace};
 use crate::progress::Progress;
-use crate::segment::{self, Collector, SegmentReport};
+use crate::segment::{self, Collector};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap as HashMap;
 use std::io;
@@ -317,8 +317,9 @@ struct Builder<'a> {
     nodes: Vec<Node>,
     groups: Vec<Group>,
     stages: Vec<(String, f64)>,
-    /// The surface segments, written to the scratch directory with the leaves.
-    segments: Option<(PathBuf, SegmentReport)>,
+    /// The surface segments, written to the scratch directory with the leaves, and their
+    /// count per scale.
+    segments: Option<(PathBuf, Vec<u32>)>,
 }
 
 impl<'a> Builder<'a> {
@@ -398,7 +399,7 @@ impl<'a> Builder<'a> {
             seconds: started.elapsed().as_secs_f64(),
             stages: builder.stages,
             peak_rss_bytes: peak_rss_bytes(),
-            segments: builder.segments.map(|(_, r)| r.counts).unwrap_or_default(),
+            segments: builder.segments.map(|(_, c)| c).unwrap_or_default(),
         })
     }
 
@@ -634,10 +635,10 @@ impl<'a> Builder<'a> {
         self.atlases.flush()?;
         let t = Instant::now();
         let path = scratch.join("segments.mwseg");
-        let report = segments.finish(&path)?;
+        let counts = segments.finish(&path)?;
         self.stages
             .push(("segments".to_string(), t.elapsed().as_secs_f64()));
-        self.segments = Some((path, report));
+        self.segments = Some((path, counts));
         Ok(pool)
     }
 

@@ -26,7 +26,7 @@ pub use highlight::Highlight;
 
 use crate::camera::{Camera, CameraError};
 use crate::lod::{Culling, FormatError, LodFile, cut};
-use crate::segment::SegmentFile;
+use crate::segment::{SegmentFile, SegmentFileError};
 use cache::{GpuPatch, Key, PatchCache};
 use glam::Vec3;
 use highlight::Prepared;
@@ -76,11 +76,9 @@ pub enum RenderError {
 /// ignored (selection then works on the pixels alone).
 pub fn open_segments(lod: &Path) -> Option<Arc<SegmentFile>> {
     let path = crate::segment::path_for(lod);
-    if !path.exists() {
-        return None;
-    }
     match SegmentFile::open(&path) {
         Ok(f) => Some(Arc::new(f)),
+        Err(SegmentFileError::Io(e)) if e.kind() == std::io::ErrorKind::NotFound => None,
         Err(e) => {
             tracing::warn!(path = %path.display(), error = %e, "segment file ignored");
             None

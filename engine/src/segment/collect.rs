@@ -27,15 +27,6 @@ struct Summary {
     border: Vec<(u32, u32)>,
 }
 
-/// Figures of the segmentation, for the build report.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct SegmentReport {
-    /// Segments per scale, fine first.
-    pub counts: Vec<u32>,
-    /// Bytes of the `.mwseg` file.
-    pub bytes: u64,
-}
-
 /// Gathers the buckets' segments during a build.
 pub struct Collector {
     path: PathBuf,
@@ -138,8 +129,9 @@ impl Collector {
         Ok(())
     }
 
-    /// Numbers, joins and merges the segments and writes the `.mwseg` file to `out`.
-    pub fn finish(self, out: &Path) -> io::Result<SegmentReport> {
+    /// Numbers, joins and merges the segments and writes the `.mwseg` file to `out`; returns
+    /// the segments per scale, fine first.
+    pub fn finish(self, out: &Path) -> io::Result<Vec<u32>> {
         let summaries = self
             .summaries
             .into_inner()
@@ -167,15 +159,11 @@ impl Collector {
             );
             border.extend(s.border.into_iter().map(|(id, x)| (id, x + base[b])));
         }
-        // Joins: one vertex in several buckets.
+        // Joins: one vertex in several buckets (a boundary without edges of its own).
         border.sort_unstable();
         for w in border.windows(2) {
             if w[0].0 == w[1].0 && w[0].1 != w[1].1 {
-                let join = Boundary {
-                    joins: 1,
-                    ..Boundary::default()
-                };
-                boundaries.push((w[0].1, w[1].1, join));
+                boundaries.push((w[0].1, w[1].1, Boundary::default()));
             }
         }
         drop(border);
@@ -204,9 +192,6 @@ impl Collector {
         let _ = std::fs::remove_file(&self.path);
         let mut counts = vec![hierarchy.fine];
         counts.extend(&hierarchy.counts);
-        Ok(SegmentReport {
-            counts,
-            bytes: std::fs::metadata(out)?.len(),
-        })
+        Ok(counts)
     }
 }

@@ -191,13 +191,6 @@ impl SegmentFile {
             _ => f32::INFINITY,
         }
     }
-
-    /// Per fine segment, its segment at `scale`.
-    pub fn scale_table(&self, scale: usize) -> Vec<u32> {
-        (0..self.fine)
-            .map(|f| self.at_scale(scale, f).unwrap_or(NONE))
-            .collect()
-    }
 }
 
 /// Writes a segment file to `path`: the hierarchy and, for each original vertex in order, its
@@ -276,7 +269,8 @@ mod tests {
         assert_eq!(f.at_scale(1, 3), Some(1));
         assert_eq!(f.at_scale(0, 3), Some(3));
         assert_eq!(f.at_scale(3, 0), None);
-        assert_eq!(f.scale_table(1), vec![0, 0, 1, 1]);
+        let scale_1: Vec<_> = (0..4).map(|x| f.at_scale(1, x)).collect();
+        assert_eq!(scale_1, [Some(0), Some(0), Some(1), Some(1)]);
         assert_eq!(f.strength(1, 1), 3.0);
         assert_eq!(f.strength(2, 0), f32::INFINITY);
         assert_eq!(f.strength(1, 2), f32::INFINITY);

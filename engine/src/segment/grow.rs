@@ -17,7 +17,7 @@ use std::collections::VecDeque;
 
 use rustc_hash::FxHashMap;
 
-use crate::lod::patch::BuildPatch;
+use crate::lod::patch::{BuildPatch, EdgeUses, edge_ends};
 
 /// Settings of the region growing.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,17 +44,14 @@ pub struct SegmentSums {
     pub vertices: u64,
     /// Sum of the members' unit normals.
     pub normal: [f64; 3],
-    /// Sum of the members' positions.
-    pub position: [f64; 3],
 }
 
 impl SegmentSums {
     /// Adds `other`'s members.
     pub fn add(&mut self, other: &SegmentSums) {
         self.vertices += other.vertices;
-        for k in 0..3 {
-            self.normal[k] += other.normal[k];
-            self.position[k] += other.position[k];
+        for (sum, x) in self.normal.iter_mut().zip(other.normal) {
+            *sum += x;
         }
     }
 
@@ -81,8 +78,6 @@ pub struct Boundary {
     pub concave: f64,
     /// `Σ len · max(0, s)`: how much it folds outwards (a convex ridge).
     pub convex: f64,
-    /// Joins across a bucket border (one vertex in two buckets), which have no length.
-    pub joins: u32,
 }
 
 impl Boundary {
@@ -91,7 +86,6 @@ impl Boundary {
         self.length += other.length;
         self.concave += other.concave;
         self.convex += other.convex;
-        self.joins += other.joins;
     }
 }
 
@@ -123,25 +117,16 @@ pub fn grow(mesh: &BuildPatch, params: &GrowParams) -> BucketSegments {
     if n == 0 {
         return BucketSegments::default();
     }
-    // Unique edges with their use counts: sorted keys.
-    let mut keys: Vec<u64> = Vec::with_capacity(mesh.indices.len());
-    for t in mesh.indices.chunks_exact(3) {
-        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-            if a != b && (a as usize) < n && (b as usize) < n {
-                keys.push(crate::lod::patch::edge_key(a, b));
-            }
-        }
-    }
-    keys.sort_unstable();
-    let mut edges: Vec<(u32, u32, u32)> = Vec::with_capacity(keys.len() / 2 + 1);
-    for &k in &keys {
-        let (a, b) = ((k >> 32) as u32, k as u32);
-        match edges.last_mut() {
-            Some(e) if e.0 == a && e.1 == b => e.2 += 1,
-            _ => edges.push((a, b, 1)),
-        }
-    }
-    drop(keys);
+    // Unique edges with their use counts (the hierarchy's border rule: used once, border).
+    let edges: Vec<(u32, u32, usize)> =
+        EdgeUses::of(mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]))
+            .counts()
+            .map(|(key, uses)| {
+                let (a, b) = edge_ends(key);
+                (a, b, uses)
+            })
+            .filter(|&(a, b, _)| a != b && (a as usize) < n && (b as usize) < n)
+            .collect();
     // Vertex adjacency (CSR).
     let mut start = vec![0u32; n + 1];
     for &(a, b, _) in &edges {
@@ -188,9 +173,6 @@ pub fn grow(mesh: &BuildPatch, params: &GrowParams) -> BucketSegments {
                 for (sum, x) in s.normal.iter_mut().zip(nv) {
                     *sum += x as f64;
                 }
-            }
-            for (sum, &x) in s.position.iter_mut().zip(&mesh.positions[v]) {
-                *sum += x as f64;
             }
             for &u in &adjacent[start[v] as usize..start[v + 1] as usize] {
                 let u = u as usize;

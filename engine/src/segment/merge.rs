@@ -275,11 +275,10 @@ pub fn merge(
 mod tests {
     use super::*;
 
-    fn sums(vertices: u64, normal: [f64; 3], position: [f64; 3]) -> SegmentSums {
+    fn sums(vertices: u64, normal: [f64; 3]) -> SegmentSums {
         SegmentSums {
             vertices,
             normal: normal.map(|x| x * vertices as f64),
-            position: position.map(|x| x * vertices as f64),
         }
     }
 
@@ -288,7 +287,6 @@ mod tests {
             length,
             concave,
             convex,
-            joins: 0,
         }
     }
 
@@ -296,9 +294,7 @@ mod tests {
     /// two segments left are the halves.
     #[test]
     fn concave_creases_survive_to_the_coarsest_scale() {
-        let s: Vec<SegmentSums> = (0..8)
-            .map(|i| sums(50, [0.0, 0.0, 1.0], [i as f64, 0.0, 0.0]))
-            .collect();
+        let s = vec![sums(50, [0.0, 0.0, 1.0]); 8];
         let mut b: Vec<(u32, u32, Boundary)> =
             (0..7u32).map(|i| (i, i + 1, edge(1.0, 0.0, 0.1))).collect();
         b[3].2 = edge(1.0, 0.9, 0.0);
@@ -323,7 +319,7 @@ mod tests {
 
     #[test]
     fn separate_surfaces_are_never_merged() {
-        let s = vec![sums(10, [0.0, 0.0, 1.0], [0.0; 3]); 6];
+        let s = vec![sums(10, [0.0, 0.0, 1.0]); 6];
         let b = vec![(0, 1, edge(1.0, 0.0, 0.0)), (2, 3, edge(1.0, 0.0, 0.0))];
         let h = merge(s, b, &MergeParams::default());
         // 6 → 4 live after two merges; no scale at 3 (nothing left to merge).

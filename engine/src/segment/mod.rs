@@ -14,7 +14,7 @@ pub mod file;
 pub mod grow;
 pub mod merge;
 
-pub use collect::{Collector, SegmentReport};
+pub use collect::Collector;
 pub use file::{SegmentFile, SegmentFileError, path_for};
 pub use grow::{Boundary, GrowParams, SegmentSums};
 pub use merge::{Hierarchy, MergeParams};

@@ -16,7 +16,6 @@ use super::graph_cut::CutStats;
 use super::mask::{self, StrokeMask};
 use super::pipeline::{Tool, select_pixels};
 use super::point::{self, PickedPoint};
-use super::segments::ViewSegments;
 use crate::camera::Camera;
 use crate::lod::Culling;
 use crate::render::{Cut, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
@@ -168,10 +167,7 @@ pub fn select_on_view(
         }
         Input::Strokes { tool, mask, params } => {
             let color_cue = model.lod().has_colors();
-            let segments = model
-                .segments()
-                .map(|file| ViewSegments::of(file, &buffers));
-            let sel = select_pixels(tool, mask, &buffers, params, color_cue, segments.as_ref())?;
+            let sel = select_pixels(tool, mask, &buffers, params, color_cue, model.segments())?;
             let cut_ms = t.elapsed().as_secs_f64() * 1e3;
             let backprojection = back_project(
                 model.lod(),

@@ -9,6 +9,7 @@ use super::graph_cut::{self, CutStats};
 use super::mask::StrokeMask;
 use super::seeds;
 use super::segments::{ViewSegments, stroke_segments};
+use crate::segment::SegmentFile;
 
 /// The selection tools.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -48,15 +49,15 @@ pub struct PixelSelection {
 }
 
 /// Runs `tool` on the strokes of `mask` over the rendered `buffers`. `color_cue`: whether the
-/// model has colours (see [`graph_cut::graph_cut`]); `segments`: the view's surface segments,
-/// when the model has them ([`super::segments`]).
+/// model has colours (see [`graph_cut::graph_cut`]); `segments`: the model's surface
+/// segments, when it has them (the tools that cut look up the view's, [`super::segments`]).
 pub fn select_pixels(
     tool: Tool,
     mask: &StrokeMask,
     buffers: &Buffers<'_>,
     params: &EnergyParams,
     color_cue: bool,
-    segments: Option<&ViewSegments>,
+    segments: Option<&SegmentFile>,
 ) -> Result<PixelSelection, SelectError> {
     buffers.check()?;
     params.validate()?;
@@ -82,8 +83,8 @@ pub fn select_pixels(
             } else {
                 seeds::heavy_lasso(mask, buffers)?
             };
-            if let Some(view) = segments {
-                s.segments = Some(stroke_segments(view, &s));
+            if let Some(file) = segments {
+                s.segments = Some(stroke_segments(&ViewSegments::of(file, buffers), &s));
             }
             let seeds_ms = ms(started);
             let (mut selected, stats) = graph_cut::graph_cut(buffers, &s, params, color_cue)?;

@@ -83,20 +83,6 @@ impl ViewSegments {
             strengths,
         }
     }
-
-    /// Per pixel, its segment at `scale` ([`NONE`] where none).
-    pub fn at_scale(&self, scale: usize) -> Vec<u32> {
-        self.local
-            .iter()
-            .map(|&l| {
-                if l == NONE {
-                    NONE
-                } else {
-                    self.ladders[l as usize].get(scale).copied().unwrap_or(NONE)
-                }
-            })
-            .collect()
-    }
 }
 
 /// The stroke segments of a view ([`stroke_segments`]).
