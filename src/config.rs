@@ -180,6 +180,16 @@ impl Settings {
         self.data_dir.join("models")
     }
 
+    /// Directory of the image repositories' images (content-addressed, as attachments).
+    pub fn lumigraph_dir(&self) -> PathBuf {
+        self.data_dir.join("lumigraph")
+    }
+
+    /// Path of the repository image with the given SHA-256 (hex): `lumigraph/ab/cdef...`.
+    pub fn lumigraph_path(&self, sha256: &str) -> Option<PathBuf> {
+        content_path(&self.lumigraph_dir(), sha256)
+    }
+
     /// Directory for files being received (temporary names, renamed when complete).
     pub fn uploads_dir(&self) -> PathBuf {
         self.data_dir.join("uploads")
@@ -189,14 +199,7 @@ impl Settings {
     /// Returns `None` unless `sha256` is 64 lower-case hex digits, so no caller-supplied
     /// string can ever become a path.
     pub fn attachment_path(&self, sha256: &str) -> Option<PathBuf> {
-        if sha256.len() != 64
-            || !sha256
-                .bytes()
-                .all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
-        {
-            return None;
-        }
-        Some(self.attachments_dir().join(&sha256[..2]).join(&sha256[2..]))
+        content_path(&self.attachments_dir(), sha256)
     }
 
     /// Creates the data directory and its sub-directories.
@@ -207,6 +210,7 @@ impl Settings {
             self.attachments_dir(),
             self.models_dir(),
             self.uploads_dir(),
+            self.lumigraph_dir(),
         ] {
             std::fs::create_dir_all(&dir)?;
         }
@@ -217,4 +221,16 @@ impl Settings {
     pub fn data_dir(&self) -> &Path {
         &self.data_dir
     }
+}
+
+/// `dir/ab/cdef...` for a well-formed SHA-256 (64 lower-case hex digits), else `None`.
+fn content_path(dir: &Path, sha256: &str) -> Option<PathBuf> {
+    if sha256.len() != 64
+        || !sha256
+            .bytes()
+            .all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+    {
+        return None;
+    }
+    Some(dir.join(&sha256[..2]).join(&sha256[2..]))
 }

@@ -14,6 +14,9 @@ pub enum AppError {
     /// The input is not valid.
     #[error("{0}")]
     Invalid(String),
+    /// The caller may not do or read this (a role short of it, geometry kept on the server).
+    #[error("{0}")]
+    Forbidden(String),
     /// The input conflicts with the current state (a model not ready, a part changed since).
     #[error("{0}")]
     Conflict(String),

@@ -15,12 +15,14 @@
 //! * [`events`]: the live-update bus;
 //! * [`views`]: best views and thumbnails of parts, in the background;
 //! * [`client`]: the limits and settings clients size their requests to;
-//! * [`uploads`]: scans into the build queue (a `.zip` unpacked), resumable upload sessions.
+//! * [`uploads`]: scans into the build queue (a `.zip` unpacked), resumable upload sessions;
+//! * [`lumigraph`]: the network mode: image repositories and who may read a model's geometry.
 
 pub mod client;
 pub mod contents;
 pub mod error;
 pub mod events;
+pub mod lumigraph;
 pub mod models;
 pub mod parts;
 pub mod selections;

@@ -14,7 +14,7 @@ use std::path::{Component, Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Instant, SystemTime};
 
-use meshwiki_engine::lod::LodFile;
+use meshwiki_engine::lod::{LodFile, sparse};
 use meshwiki_engine::render::{RenderModel, open_segments};
 
 use super::AppError;
@@ -80,6 +80,19 @@ pub struct OpenModel {
     pub path: PathBuf,
     /// The hierarchy as JSON (`docs/FORMAT.md`), encoded on first request.
     pub json: OnceLock<bytes::Bytes>,
+    /// Object-space error of the model's sparse mesh (`lod::sparse`): what a model whose
+    /// geometry stays on the server serves to everyone but admins.
+    pub sparse_error: f32,
+}
+
+impl OpenModel {
+    /// Whether node `node` is in the sparse mesh or coarser (false for a node that does not
+    /// exist).
+    pub fn within_sparse(&self, node: u32) -> bool {
+        self.lod
+            .node(node)
+            .is_ok_and(|n| sparse::within_sparse(n, self.sparse_error))
+    }
 }
 
 impl std::fmt::Debug for OpenModel {
@@ -221,8 +234,12 @@ impl ModelRegistry {
             return Ok(e.open.clone());
         }
         let opened = path.clone();
-        let (lod, segments) = tokio::task::spawn_blocking(move || {
-            LodFile::open(&opened).map(|lod| (lod, open_segments(&opened)))
+        let (lod, segments, sparse_error) = tokio::task::spawn_blocking(move || {
+            LodFile::open(&opened).map(|lod| {
+                let budget = sparse::sparse_budget(lod.header().input_triangle_count);
+                let sparse_error = sparse::sparse_error(lod.nodes(), budget);
+                (lod, open_segments(&opened), sparse_error)
+            })
         })
         .await
         .map_err(AppError::internal)?
@@ -236,6 +253,7 @@ impl ModelRegistry {
             lod,
             path,
             json: OnceLock::new(),
+            sparse_error,
         });
         let mut dropped = Vec::new();
         {
@@ -276,11 +294,13 @@ impl ModelRegistry {
 
 impl super::App {
     /// Deletes model `id` (by `user_id`) with its parts and assignments (contents stay): a build
-    /// still running stops first and leaves nothing behind; the registry forgets the model and
-    /// its LOD file is removed.
+    /// still running stops first and leaves nothing behind; the registry forgets the model, its
+    /// LOD file is removed, and so are its repository's images no other model uses.
     pub async fn delete_model(&self, user_id: i64, id: i64) -> Result<models::Model, AppError> {
         self.jobs.cancel_for_model(id, Some(user_id)).await?;
+        let images = crate::store::lumigraph::model_blobs(&self.db, id).await?;
         let model = models::delete(&self.db, id, user_id).await?;
+        self.jobs.remove_unused_images(images).await;
         self.models.forget(model.id);
         self.sync_search().await;
         if let Some(lod) = &model.lod_path {

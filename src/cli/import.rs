@@ -103,7 +103,7 @@ async fn import(db: &Db, settings: Settings, args: &Args, bytes: u64) -> anyhow:
             memory_budget: Some(args.memory),
             max_patch_triangles: Some(args.max_patch_triangles),
             threads: args.threads,
-            triangles: None,
+            ..JobOptions::default()
         },
         running_pid: Some(std::process::id() as i64),
     };
@@ -149,5 +149,6 @@ async fn import(db: &Db, settings: Settings, args: &Args, bytes: u64) -> anyhow:
         JobEnd::Failed(msg) => bail!("import failed: {msg}"),
         JobEnd::Cancelled => bail!("import cancelled"),
         JobEnd::Requeued => bail!("import interrupted"),
+        JobEnd::Rendered(_) => bail!("the import ran an image repository job"),
     }
 }

@@ -17,6 +17,7 @@
 //!   uploads) is removed. On shutdown running builds are stopped and queued again.
 
 pub mod archive;
+pub mod lumigraph;
 pub mod progress;
 pub mod thumbnail;
 
@@ -116,6 +117,8 @@ pub enum JobEnd {
     Cancelled,
     /// Stopped by a shutdown and queued again.
     Requeued,
+    /// An image repository was built; its report.
+    Rendered(serde_json::Value),
 }
 
 /// What a build reads.
@@ -704,6 +707,7 @@ impl Jobs {
                 .map(|p| Source::File(PathBuf::from(p)))
                 .ok_or_else(|| "the job names no input file".to_string()),
             JobKind::Demo => Ok(Source::Demo(job.options.triangles.unwrap_or(2_000_000))),
+            JobKind::Lumigraph => Err("an image repository job builds no hierarchy".into()),
         }
     }
 
@@ -783,6 +787,9 @@ impl Jobs {
     }
 
     async fn build(&self, job: &Job, progress: &Arc<JobProgress>) -> Result<JobEnd, JobError> {
+        if job.kind == JobKind::Lumigraph {
+            return self.build_lumigraph(job, progress).await;
+        }
         let db = &self.inner.db;
         let Some(model_id) = job.model_id else {
             jobs::finish_failed(db, job.id, JobStatus::Cancelled, "the model was deleted").await?;
@@ -947,14 +954,24 @@ impl Jobs {
 
     /// Removes what crashed builds and uploads left behind: engine scratch directories and
     /// temporary files of dead processes in `models/`, LOD files of deleted models, stale
-    /// temporary files and unclaimed inputs in `uploads/`.
+    /// temporary files and unclaimed inputs in `uploads/`, repository images no model uses
+    /// (run before the workers start: a running build's images are not recorded yet).
     pub async fn cleanup_leftovers(&self) -> Result<(), JobError> {
         let settings = self.inner.settings.clone();
         let lods = jobs::model_lod_paths(&self.inner.db).await?;
         let sources = jobs::pending_sources(&self.inner.db).await?;
-        let removed = tokio::task::spawn_blocking(move || cleanup_dirs(&settings, &lods, &sources))
-            .await
-            .map_err(|e| JobError::Invalid(e.to_string()))??;
+        let images = crate::store::lumigraph::used_blobs(&self.inner.db).await?;
+        let removed = tokio::task::spawn_blocking(move || {
+            let mut removed = cleanup_dirs(&settings, &lods, &sources)?;
+            removed.extend(crate::blobs::remove_unused(
+                &settings,
+                crate::blobs::Bucket::Lumigraph,
+                &images,
+            )?);
+            Ok::<_, std::io::Error>(removed)
+        })
+        .await
+        .map_err(|e| JobError::Invalid(e.to_string()))??;
         for p in removed {
             tracing::info!(path = %p.display(), "removed leftover of an interrupted build");
         }

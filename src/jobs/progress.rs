@@ -14,6 +14,8 @@ use crate::store::jobs::ProgressUpdate;
 pub const THUMBNAIL_STAGE: &str = "thumbnail";
 /// Name of the stage that generates the demo relief.
 pub const GENERATE_STAGE: &str = "generating";
+/// Stage of an image repository build (its units are grid points).
+pub const LUMIGRAPH_STAGE: &str = "rendering images";
 
 /// Progress of one job: stage, units done and in all, and the cancellation flag.
 pub struct JobProgress {
@@ -99,6 +101,8 @@ pub fn percent(stage: &str, fraction: f64) -> f64 {
         (92.0, 98.0)
     } else if stage == THUMBNAIL_STAGE {
         (98.0, 100.0)
+    } else if stage == LUMIGRAPH_STAGE {
+        (0.0, 100.0)
     } else {
         (0.0, 0.0)
     };

@@ -1,7 +1,9 @@
 //! `jobs`: background LOD builds and their progress. A job is created `queued` together with
 //! its model (one transaction), claimed (`running`) by a worker, and ends `done` (the model
 //! `ready` with its statistics, in the same transaction), `failed` or `cancelled` (the model
-//! `failed` with the message). The runner lives in `crate::jobs`.
+//! `failed` with the message). The runner lives in `crate::jobs`. A `lumigraph` job renders
+//! the image repository of a ready model (`store::lumigraph`): it moves that repository's
+//! status instead, and never the model's.
 
 use serde::{Deserialize, Serialize};
 use sqlx::Row;
@@ -22,6 +24,8 @@ pub enum JobKind {
     File,
     /// The generated demo relief.
     Demo,
+    /// The Grid-Lumigraph image repository of a ready model.
+    Lumigraph,
 }
 
 impl JobKind {
@@ -31,7 +35,13 @@ impl JobKind {
             JobKind::Upload => "upload",
             JobKind::File => "file",
             JobKind::Demo => "demo",
+            JobKind::Lumigraph => "lumigraph",
         }
+    }
+
+    /// Whether the job builds its model's hierarchy (and so moves the model's status).
+    pub fn builds_model(self) -> bool {
+        !matches!(self, JobKind::Lumigraph)
     }
 }
 
@@ -88,6 +98,12 @@ pub struct JobOptions {
     /// Triangles of the generated relief (demo jobs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub triangles: Option<u64>,
+    /// Grid points per axis (lumigraph jobs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grid: Option<u32>,
+    /// Image side in pixels (lumigraph jobs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size: Option<u32>,
 }
 
 /// A job.
@@ -197,7 +213,7 @@ pub struct NewJob {
     pub running_pid: Option<i64>,
 }
 
-async fn get_tx(tx: &mut Tx, id: i64) -> Result<Job> {
+pub(super) async fn get_tx(tx: &mut Tx, id: i64) -> Result<Job> {
     let row = sqlx::query(sqlx::AssertSqlSafe(format!(
         "SELECT {COLUMNS} FROM jobs WHERE id = ?"
     )))
@@ -272,7 +288,12 @@ pub fn check_takes_scan(model: &Model) -> Result<()> {
 
 /// Inserts `job` for `model_id` (running at once when it names its runner), with its audit
 /// entry; returns its id.
-async fn insert_tx(tx: &mut Tx, model_id: i64, job: &NewJob, user_id: i64) -> Result<i64> {
+pub(super) async fn insert_tx(
+    tx: &mut Tx,
+    model_id: i64,
+    job: &NewJob,
+    user_id: i64,
+) -> Result<i64> {
     let now = crate::now_rfc3339();
     let (status, started) = match job.running_pid {
         Some(_) => (JobStatus::Running, Some(now.clone())),
@@ -299,7 +320,7 @@ async fn insert_tx(tx: &mut Tx, model_id: i64, job: &NewJob, user_id: i64) -> Re
     .bind(&now)
     .fetch_one(&mut **tx)
     .await?;
-    if job.running_pid.is_some() {
+    if job.running_pid.is_some() && job.kind.builds_model() {
         set_model_status_tx(tx, model_id, ModelStatus::Building, None).await?;
     }
     super::audit::record(
@@ -414,7 +435,11 @@ pub async fn claim_next(db: &Db, pid: i64) -> Result<Option<Job>> {
     };
     let job = get_tx(&mut tx, id).await?;
     if let Some(model) = job.model_id {
-        set_model_status_tx(&mut tx, model, ModelStatus::Building, None).await?;
+        if job.kind.builds_model() {
+            set_model_status_tx(&mut tx, model, ModelStatus::Building, None).await?;
+        } else {
+            super::lumigraph::set_status_tx(&mut tx, model, id, "building", None).await?;
+        }
     }
     tx.commit().await?;
     Ok(Some(job))
@@ -497,8 +522,7 @@ pub async fn request_cancel(db: &Db, id: i64, user_id: Option<i64>) -> Result<Ca
             .execute(&mut *tx)
             .await?;
             if let Some(model) = job.model_id {
-                set_model_status_tx(&mut tx, model, ModelStatus::Failed, Some(CANCELLED_MESSAGE))
-                    .await?;
+                end_model_tx(&mut tx, &job, model, CANCELLED_MESSAGE).await?;
             }
             CancelOutcome::Cancelled(get_tx(&mut tx, id).await?)
         }
@@ -615,7 +639,7 @@ pub async fn finish_done(
     Ok(true)
 }
 
-async fn done_tx(tx: &mut Tx, id: i64, report: &serde_json::Value) -> Result<()> {
+pub(super) async fn done_tx(tx: &mut Tx, id: i64, report: &serde_json::Value) -> Result<()> {
     let now = crate::now_rfc3339();
     sqlx::query(
         "UPDATE jobs SET status = 'done', stage = 'done', percent = 100, message = NULL,
@@ -655,7 +679,7 @@ pub async fn finish_failed(db: &Db, id: i64, status: JobStatus, message: &str) -
     .execute(&mut *tx)
     .await?;
     if let Some(model) = job.model_id {
-        set_model_status_tx(&mut tx, model, ModelStatus::Failed, Some(message)).await?;
+        end_model_tx(&mut tx, &job, model, message).await?;
     }
     super::audit::record(
         &mut tx,
@@ -684,9 +708,30 @@ pub async fn requeue(db: &Db, id: i64) -> Result<()> {
     .execute(&mut *tx)
     .await?;
     if let Some(model) = job.model_id {
-        set_model_status_tx(&mut tx, model, ModelStatus::Pending, None).await?;
+        queued_again_tx(&mut tx, &job, model).await?;
     }
     tx.commit().await?;
+    Ok(())
+}
+
+/// A failed or cancelled job's model is `failed` with `message`; a lumigraph job's
+/// repository is (the model stays as it is).
+async fn end_model_tx(tx: &mut Tx, job: &Job, model: i64, message: &str) -> Result<()> {
+    if job.kind.builds_model() {
+        set_model_status_tx(tx, model, ModelStatus::Failed, Some(message)).await?;
+    } else {
+        super::lumigraph::set_status_tx(tx, model, job.id, "failed", Some(message)).await?;
+    }
+    Ok(())
+}
+
+/// A job queued again: its model is `pending` again, or its repository `queued`.
+async fn queued_again_tx(tx: &mut Tx, job: &Job, model: i64) -> Result<()> {
+    if job.kind.builds_model() {
+        set_model_status_tx(tx, model, ModelStatus::Pending, None).await?;
+    } else {
+        super::lumigraph::set_status_tx(tx, model, job.id, "queued", None).await?;
+    }
     Ok(())
 }
 
@@ -724,7 +769,7 @@ pub async fn recover(db: &Db, alive: impl Fn(i64) -> bool) -> Result<Recovered> 
             continue;
         }
         match job.kind {
-            JobKind::Upload | JobKind::Demo => {
+            JobKind::Upload | JobKind::Demo | JobKind::Lumigraph => {
                 sqlx::query(
                     "UPDATE jobs SET status = 'queued', stage = '', done = 0, total = 0,
                      percent = 0, runner_pid = NULL, updated_at = ? WHERE id = ?",
@@ -734,7 +779,7 @@ pub async fn recover(db: &Db, alive: impl Fn(i64) -> bool) -> Result<Recovered> 
                 .execute(&mut *tx)
                 .await?;
                 if let Some(model) = job.model_id {
-                    set_model_status_tx(&mut tx, model, ModelStatus::Pending, None).await?;
+                    queued_again_tx(&mut tx, &job, model).await?;
                 }
                 out.requeued.push(job.id);
             }

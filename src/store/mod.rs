@@ -12,6 +12,7 @@ pub mod audit;
 pub mod changes;
 pub mod contents;
 pub mod jobs;
+pub mod lumigraph;
 pub mod models;
 pub mod part_revisions;
 pub mod parts;
@@ -115,6 +116,11 @@ const MIGRATIONS: &[(i64, &str, &str)] = &[
         8,
         "public_models",
         include_str!("../../migrations/0008_public_models.sql"),
+    ),
+    (
+        9,
+        "lumigraph",
+        include_str!("../../migrations/0009_lumigraph.sql"),
     ),
 ];
 

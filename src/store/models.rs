@@ -35,6 +35,23 @@ impl ModelStatus {
     }
 }
 
+/// Who may read a model's geometry.
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, sqlx::Type, ToSchema,
+)]
+#[serde(rename_all = "lowercase")]
+#[sqlx(rename_all = "lowercase")]
+pub enum GeometryAccess {
+    /// Everyone who may view the model streams its patches at full resolution.
+    #[default]
+    Full,
+    /// Only admins obtain geometry finer than the sparse mesh (patches, the LOD file, exports,
+    /// depth and id buffers); everyone else views the model image-based (its Grid-Lumigraph
+    /// over the sparse mesh). Selection, highlights and measurements on the server still use
+    /// the full-resolution scan.
+    Sparse,
+}
+
 /// Axis-aligned bounding box.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BBox {
@@ -72,6 +89,8 @@ pub struct Model {
     /// Anonymous visitors may view the model, search and read the information on its parts
     /// (never edit). Set by admins.
     pub public: bool,
+    /// Who may read its geometry (set by admins).
+    pub geometry_access: GeometryAccess,
     /// Creator.
     pub created_by: i64,
     /// Creation time.
@@ -84,7 +103,7 @@ pub struct Model {
 
 const COLUMNS: &str = "id, title, description, source_name, status, vertex_count, triangle_count, \
     bbox_min_x, bbox_min_y, bbox_min_z, bbox_max_x, bbox_max_y, bbox_max_z, lod_path, error, \
-    thumbnail_attachment_id, public, created_by, created_at, updated_at";
+    thumbnail_attachment_id, public, geometry_access, created_by, created_at, updated_at";
 
 fn from_row(r: &SqliteRow) -> std::result::Result<Model, sqlx::Error> {
     let corners: [Option<f64>; 6] = [
@@ -115,6 +134,7 @@ fn from_row(r: &SqliteRow) -> std::result::Result<Model, sqlx::Error> {
         error: r.try_get("error")?,
         thumbnail_attachment_id: r.try_get("thumbnail_attachment_id")?,
         public: r.try_get("public")?,
+        geometry_access: r.try_get("geometry_access")?,
         created_by: r.try_get("created_by")?,
         created_at: r.try_get("created_at")?,
         updated_at: r.try_get("updated_at")?,
@@ -244,6 +264,9 @@ pub struct ModelPatch {
     /// Public read-only access for anonymous visitors (admins only).
     #[serde(default)]
     pub public: Option<bool>,
+    /// Who may read the geometry (admins only).
+    #[serde(default)]
+    pub geometry_access: Option<GeometryAccess>,
 }
 
 /// Serde helper telling an absent field (`None`) from an explicit `null` (`Some(None)`).
@@ -283,15 +306,19 @@ pub async fn update(db: &Db, id: i64, patch: &ModelPatch, user_id: i64) -> Resul
     if let Some(p) = patch.public {
         model.public = p;
     }
+    if let Some(g) = patch.geometry_access {
+        model.geometry_access = g;
+    }
     model.updated_at = crate::now_rfc3339();
     sqlx::query(
         "UPDATE models SET title = ?, description = ?, thumbnail_attachment_id = ?, public = ?,
-         updated_at = ? WHERE id = ?",
+         geometry_access = ?, updated_at = ? WHERE id = ?",
     )
     .bind(&model.title)
     .bind(&model.description)
     .bind(model.thumbnail_attachment_id)
     .bind(model.public)
+    .bind(model.geometry_access)
     .bind(&model.updated_at)
     .bind(id)
     .execute(&mut *tx)
@@ -311,6 +338,7 @@ pub async fn update(db: &Db, id: i64, patch: &ModelPatch, user_id: i64) -> Resul
             "description_changed": patch.description.is_some(),
             "thumbnail_attachment_id": patch.thumbnail_attachment_id,
             "public": patch.public,
+            "geometry_access": patch.geometry_access,
         }),
     )
     .await?;

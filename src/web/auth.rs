@@ -262,6 +262,11 @@ impl Reader {
         self.0.is_none()
     }
 
+    /// The logged-in user, if any.
+    pub fn user(&self) -> Option<&User> {
+        self.0.as_ref().map(Auth::user)
+    }
+
     /// 401 for an anonymous visitor unless `public` holds.
     fn allow(&self, public: bool) -> Result<(), ApiError> {
         if self.0.is_some() || public {

@@ -198,6 +198,7 @@ impl From<AppError> for ApiError {
         match e {
             AppError::NotFound(m) => ApiError::NotFound(m),
             AppError::Invalid(m) => ApiError::BadRequest(m),
+            AppError::Forbidden(m) => ApiError::Forbidden(m),
             AppError::Conflict(m) => ApiError::Conflict(m),
             AppError::UnsupportedMedia(m) => ApiError::UnsupportedMediaType(m),
             AppError::TooLarge(m) => ApiError::PayloadTooLarge(m),

@@ -1,7 +1,9 @@
 //! Serving a model's LOD hierarchy (`docs/FORMAT.md`, "HTTP"): the DAG as JSON or as the
 //! file's header and tables, one patch blob, or the whole file, with `ETag`, `If-None-Match`
 //! (304) and single byte ranges (206; 416 when unsatisfiable; a malformed or multiple range is
-//! ignored: 200). Anyone logged in reads.
+//! ignored: 200). Anyone logged in reads; of a model that keeps its geometry on the server
+//! (`geometry_access` = `sparse`), only admins read patches finer than its sparse mesh and the
+//! whole file (403 for everyone else).
 //!
 //! Files are opened through the application's model registry ([`crate::app::models`]), shared
 //! with rendering and selection: a rebuilt model is reopened; memory maps of replaced files
@@ -18,6 +20,7 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Reader;
 use super::{ApiError, AppState};
+use crate::app::lumigraph::{GeometryGrant, sparse_refusal};
 use crate::app::models::{OpenModel, Purpose};
 
 /// Bodies up to this size are copied in one piece; larger ones stream.
@@ -235,7 +238,7 @@ pub fn hierarchy_json(lod: &LodFile) -> Result<Vec<u8>, serde_json::Error> {
 // ---- conditional and range requests -----------------------------------------------------
 
 /// Whether `If-None-Match` names `etag` (or `*`).
-fn not_modified(req: &HttpRequest, etag: &str) -> bool {
+pub(super) fn not_modified(req: &HttpRequest, etag: &str) -> bool {
     let Some(v) = req
         .headers()
         .get(header::IF_NONE_MATCH)
@@ -573,6 +576,13 @@ async fn patch(
         ))
     })?;
     open.lod.blob(node).map_err(lod_error)?;
+    if let GeometryGrant::Sparse(_) = state.geometry_grant(reader.user(), id).await?
+        && !open.within_sparse(node)
+    {
+        return Err(
+            sparse_refusal(id, &format!("patch {node}, finer than the sparse mesh,")).into(),
+        );
+    }
     let etag = format!("\"{:08x}\"", record.blob_crc);
     let start = record.blob_offset as usize;
     let end = start + record.blob_len as usize;
@@ -617,6 +627,9 @@ async fn file(
     id: web::Path<i64>,
 ) -> Result<HttpResponse, ApiError> {
     reader.model(&state.db, *id).await?;
+    state
+        .require_full_geometry(reader.user(), *id, "the LOD file")
+        .await?;
     let open = state.models.open(&state.db, *id, Purpose::Serve).await?;
     let end = open.lod.bytes().len();
     let etag = open.etag.clone();

@@ -13,6 +13,7 @@ pub mod fuzzing;
 pub mod jobs;
 pub mod layout;
 pub mod lod;
+pub mod lumigraph;
 pub mod models;
 pub mod multipart;
 pub mod openapi;
@@ -92,6 +93,7 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     uploads::configure(cfg);
     models::configure(cfg);
     lod::configure(cfg);
+    lumigraph::configure(cfg);
     parts::configure(cfg);
     selections::configure(cfg);
     render::configure(cfg);

@@ -87,9 +87,10 @@ async fn get(
     Ok(HttpResponse::Ok().json(models::get(&state.db, *id).await?))
 }
 
-/// Change a model's title, description or thumbnail
+/// Change a model's title, description, thumbnail or access
 ///
-/// A new title re-indexes, for search, every content assigned to the model's parts.
+/// A new title re-indexes, for search, every content assigned to the model's parts. `public`
+/// and `geometry_access` are admins' to change (403 otherwise).
 #[utoipa::path(patch, path = "/api/v1/models/{id}", tag = "models",
     params(("id" = i64, Path, description = "model id")),
     request_body = ModelPatch,
@@ -102,8 +103,9 @@ async fn update(
     body: web::Json<ModelPatch>,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Editor)?;
-    if body.public.is_some() {
-        // Opening a model to anonymous visitors is an admin's decision.
+    if body.public.is_some() || body.geometry_access.is_some() {
+        // Opening a model to anonymous visitors, or its geometry to viewers, is an admin's
+        // decision.
         auth.require(Role::Admin)?;
     }
     let model = models::update(&state.db, *id, &body, auth.id()).await?;

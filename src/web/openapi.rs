@@ -92,6 +92,7 @@ pub fn document() -> Value {
         super::uploads::Api::openapi(),
         super::models::Api::openapi(),
         super::lod::Api::openapi(),
+        super::lumigraph::Api::openapi(),
         super::parts::Api::openapi(),
         super::selections::Api::openapi(),
         super::render::Api::openapi(),

@@ -782,6 +782,12 @@ async fn buffers(
     let p = prepare(&state, *model_id, &q, Route::Buffers).await?;
     let (w, h) = (p.params.width, p.params.height);
     let o = p.params.outputs;
+    if o.normal || o.depth || o.ids {
+        // Depth, normals and vertex ids are the full-resolution surface.
+        state
+            .require_full_geometry(reader.user(), *model_id, "depth, normal and id buffers")
+            .await?;
+    }
     let per_px = 4 * o.color as u64 + 12 * o.normal as u64 + 4 * o.depth as u64 + 16 * o.ids as u64;
     let bytes = o.frame_bytes(w, h) + per_px * w as u64 * h as u64 + 4096 + 2 * p.set_bytes;
     let ticket = p.service.admit(bytes).await?;

@@ -51,6 +51,8 @@ pub const JS_MODULES: &[(&str, &str)] = js_modules![
     "lod/table.js",
     "lod/worker.js",
     "lod/workers.js",
+    "lumigraph/image.js",
+    "lumigraph/repository.js",
     "parts/callouts.js",
     "parts/live.js",
     "parts/match.js",

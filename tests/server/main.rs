@@ -11,6 +11,7 @@ mod import;
 mod jobs;
 mod layers;
 mod lod;
+mod lumigraph;
 mod merge;
 mod openapi;
 mod pages;

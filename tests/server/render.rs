@@ -16,7 +16,7 @@ use crate::harness::*;
 use crate::lod::relief_ply;
 
 /// A real scan with vertex colours, or a generated relief when the shared data is absent.
-fn scan(dir: &Path) -> PathBuf {
+pub fn scan(dir: &Path) -> PathBuf {
     let real =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/meshes/gargoyle_50k_vcolor.ply");
     if real.is_file() {
@@ -30,7 +30,7 @@ fn scan(dir: &Path) -> PathBuf {
 }
 
 /// `meshwiki import FILE --title TITLE` before the server starts; returns the model id.
-fn import(data: &Path, file: &Path, title: &str) -> i64 {
+pub fn import(data: &Path, file: &Path, title: &str) -> i64 {
     let out = Command::new(BIN)
         .args(["import"])
         .arg(file)
@@ -70,13 +70,13 @@ fn differing(a: &[[u8; 4]], b: &[[u8; 4]]) -> usize {
 }
 
 /// A decoded buffers body.
-struct Buffers {
+pub struct Buffers {
     header: Value,
     body: Vec<u8>,
 }
 
 impl Buffers {
-    fn parse(r: &Resp) -> Buffers {
+    pub fn parse(r: &Resp) -> Buffers {
         assert_eq!(r.status, 200, "{}", r.text());
         assert_eq!(r.header("content-type"), Some("application/octet-stream"));
         let b = &r.body;
@@ -120,7 +120,7 @@ impl Buffers {
             .collect()
     }
 
-    fn floats(&self, name: &str) -> Vec<f32> {
+    pub fn floats(&self, name: &str) -> Vec<f32> {
         self.words(name).into_iter().map(f32::from_bits).collect()
     }
 

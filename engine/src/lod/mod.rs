@@ -19,6 +19,7 @@ pub mod nearest;
 pub mod partition;
 pub mod patch;
 pub mod simplify;
+pub mod sparse;
 mod spill;
 
 pub use build::{

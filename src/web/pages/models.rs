@@ -12,6 +12,7 @@ use super::filters;
 use super::{Layout, redirect, render};
 use meshwiki_engine::camera::Camera;
 
+use crate::app::lumigraph::GeometryGrant;
 use crate::app::models::Purpose;
 use crate::search::SearchHit;
 use crate::store::assignments::{self, AssignedContent};
@@ -201,11 +202,18 @@ fn viewer_json(
     can_edit: bool,
     config: &crate::app::client::ClientConfig,
     home: Option<&Camera>,
+    geometry: Option<GeometryGrant>,
 ) -> String {
     let json = serde_json::json!({
         "model": model,
         "parts": parts,
         "can_edit": can_edit,
+        // What of the geometry this reader may stream: everything, or (a model that keeps its
+        // geometry on the server) the sparse mesh, which the viewer then shades image-based.
+        "geometry": match geometry {
+            Some(GeometryGrant::Sparse(e)) => serde_json::json!({"full": false, "sparse_error": e}),
+            _ => serde_json::json!({"full": true}),
+        },
         // The first view: the side the model's thumbnail shows (the viewer frames it to its own
         // canvas).
         "home": home.map(|c| serde_json::json!({
@@ -408,6 +416,12 @@ async fn show(
     } else {
         None
     };
+    let geometry = if ready {
+        let user = reader.auth.as_ref().map(|a| a.user());
+        state.geometry_grant(user, model.id).await.ok()
+    } else {
+        None
+    };
     let status = status_words(
         &model,
         build_job
@@ -444,6 +458,7 @@ async fn show(
             can_edit,
             &state.client_config(),
             home.as_ref(),
+            geometry,
         ),
         layout,
         description_html: markdown::render(&model.description),

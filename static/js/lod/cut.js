@@ -86,6 +86,11 @@ export class Cut {
     this.ratio = new Float64Array(table.groupCount);
     /** Nodes that must stay in memory: the cut and, as fallback, the products it replaced. */
     this.pinned = new Uint8Array(table.nodeCount);
+    /**
+     * Groups of at most this error never refine: the sparse mesh of a model that keeps its
+     * geometry on the server (lod::sparse: its nodes' parent error exceeds the floor). -1: none.
+     */
+    this.floor = -1;
   }
 
   /**
@@ -193,6 +198,7 @@ export class Cut {
     let pending = 0;
     for (const g of t.groupOrder) {
       refined[g] = 0;
+      if (t.groupError[g] <= this.floor) continue;
       const products = t.products[g];
       const members = t.members[g];
       let allIn = true;

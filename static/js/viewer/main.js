@@ -7,7 +7,8 @@
 
 import * as THREE from 'three';
 import { parseBinary, fromJson } from '../lod/table.js';
-import { Streamer } from '../lod/stream.js';
+import { DEFAULT_SETTINGS, Streamer } from '../lod/stream.js';
+import { Repository } from '../lumigraph/repository.js';
 import { DecoderPool } from '../lod/workers.js';
 import { PartStore } from '../parts/parts.js';
 import { Callouts } from '../parts/callouts.js';
@@ -22,6 +23,11 @@ import { clearQuery, linkedPart, linkedQuery, parseCamera, writePart } from './u
 import { SelectController } from '../select/controller.js';
 
 const CALLOUT_INTERVAL_MS = 120;
+/**
+ * Projected error (pixels) of the sparse mesh's cut in image-based mode: coarser than local
+ * rendering's, since the mesh only corrects the images (system paper §5.3).
+ */
+const IMAGE_PIXEL_ERROR = 8;
 /** Live events in a burst (a part, then its contents) refresh the page's parts list once. */
 const PART_LIST_DEBOUNCE_MS = 300;
 /** Visibility passes (streaming occlusion feedback) at most this often while the view changes. */
@@ -118,6 +124,16 @@ class Viewer {
       },
       onChange: () => this.requestFrame(),
     });
+    // A model that keeps its geometry on the server streams no patch finer than its sparse mesh
+    // (one patch per request: the whole file is refused) and is seen image-based.
+    this.geometryFull = data.geometry?.full !== false;
+    this.mode = 'model';
+    this.repo = null;
+    this.lumigraphStatus = null;
+    if (!this.geometryFull) {
+      this.streamer.cut.floor = data.geometry.sparse_error;
+      this.streamer.setSettings({ batchBytes: 0 });
+    }
     this.nav = new Navigation(
       this.view,
       table,
@@ -170,7 +186,40 @@ class Viewer {
     this.stopLive = listen(this.modelId, this.store, (ev) => this.liveEvent(ev));
     this.land();
     this.store.loadBitmaps();
+    if (!this.geometryFull || new URLSearchParams(window.location.search).get('view') === 'image') this.setMode('image');
     this.requestFrame();
+  }
+
+  /**
+   * `image`: the sparse mesh shaded by the model's image repository (Grid-Lumigraph; its own
+   * colours where no image saw it, or while the repository is not built); `model`: the patches
+   * at full resolution (refused for a model that keeps its geometry on the server).
+   */
+  async setMode(mode) {
+    if (mode === 'image') {
+      this.mode = 'image';
+      this.root.dataset.mode = 'image';
+      this.streamer.setSettings({ pixelError: IMAGE_PIXEL_ERROR });
+      if (!this.repo) {
+        try {
+          const res = await fetch(`/api/v1/models/${this.modelId}/lumigraph`, { credentials: 'same-origin' });
+          const d = await res.json();
+          this.lumigraphStatus = res.ok ? d.status : `HTTP ${res.status}`;
+          if (res.ok && d.status === 'ready' && !this.repo) this.repo = new Repository(this.modelId, d, { onChange: () => this.requestFrame() });
+        } catch (e) {
+          this.lumigraphStatus = String(e.message || e);
+          console.warn('meshwiki viewer: image repository:', this.lumigraphStatus);
+        }
+      }
+      if (this.mode === 'image' && this.repo && this.view.lumigraph !== this.repo) this.view.setLumigraph(this.repo);
+    } else if (this.geometryFull) {
+      this.mode = 'model';
+      this.root.dataset.mode = 'model';
+      this.view.setLumigraph(null);
+      this.streamer.setSettings({ pixelError: DEFAULT_SETTINGS.pixelError });
+    }
+    this.requestFrame();
+    return this.mode;
   }
 
   /** Applies the reader's light and background. */
@@ -275,6 +324,7 @@ class Viewer {
     if (this.view.resize()) this.layoutDirty = true;
     const result = this.streamer.update(this.cameraState());
     this.result = result;
+    if (this.repo && this.mode === 'image') this.repo.update(this.cameraState(), result.draw, this.table);
     this.view.setDrawn(result.draw);
     const drafting = this.selection !== null && this.selection.hasDraft();
     const channel = this.hovered !== null ? 1 : this.selected !== null || drafting ? 2 : 0;
@@ -636,7 +686,10 @@ class Viewer {
       wanted: r.requests.length,
       hiddenDrawn: r.draw.filter((n) => this.streamer.occluded[n]).length,
       inFlight: this.streamer.inFlight.size,
-      settled: this.streamer.settled(),
+      settled: this.streamer.settled() && (this.mode !== 'image' || !this.repo || this.repo.settled()),
+      mode: this.mode,
+      lumigraphStatus: this.lumigraphStatus,
+      lumigraph: this.repo ? { ...this.repo.stats, slots: this.repo.slots.filter((s) => s !== null).length, layers: this.repo.loaded.size } : null,
       resident: this.streamer.cache.entries.size,
       residentBytes: this.streamer.cache.bytes,
       throughput: this.streamer.throughput.estimate(),
@@ -677,6 +730,14 @@ async function boot() {
         viewer.requestFrame();
       },
       select: (id) => viewer.select(id, true),
+      /** `image` or `model` (see Viewer.setMode); resolves to the mode in force. */
+      setMode: (mode) => viewer.setMode(mode),
+      /** Image-based mode: shade with the repository's images (true) or the sparse mesh's own
+       * normals and colours (false; tests compare the two). */
+      setImageShading: (on) => {
+        viewer.view.setLumigraph(on && viewer.mode === 'image' ? viewer.repo : null);
+        viewer.requestFrame();
+      },
       /** The region selection's state (editors; null for viewers). */
       selection: () => (viewer.selection ? viewer.selection.state() : null),
       /** Renders a frame now and returns it as a PNG data URL (tests, bench). */

@@ -11,6 +11,7 @@
 
 import * as THREE from 'three';
 import { OutlinePass } from './outline.js';
+import { SLOTS } from '../lumigraph/repository.js';
 
 export const BACKGROUND = 0x1d2026;
 const BASE_COLOR = [209 / 255, 204 / 255, 194 / 255, 1];
@@ -53,14 +54,87 @@ in vec3 vWorld;
 in vec4 vColor;
 in vec2 vMark;
 in vec2 vUv;
+#ifdef LUMIGRAPH
+// Image-based mode (../lumigraph/repository.js): the repository's images of the grid points
+// nearest to the eye, projected onto this sparse surface (system paper Fig. 15).
+uniform highp sampler2DArray uLgAlbedo;
+uniform highp sampler2DArray uLgNormal;
+uniform highp sampler2DArray uLgDepth;
+uniform vec4 uLgPoints[${SLOTS}];
+uniform vec4 uLgLayers[${SLOTS * 6}];
+uniform vec3 uLgForward[6];
+uniform vec3 uLgUp[6];
+uniform float uLgTolerance;
+uniform float uLgSharpness;
+uniform float uLgDepthSide;
+uniform float uLgPixel;
+// Blends the images that saw point P: each weighed by how close its ray is to the view ray
+// (towards the eye, V), and used only where its depth shows this very surface (within the
+// sparse mesh's error plus a few texels), so no image lands on a surface it did not see.
+bool lumigraph(vec3 P, vec3 V, out vec3 albedo, out vec3 normal, out float hasAlbedo) {
+  vec3 aSum = vec3(0.0);
+  vec3 nSum = vec3(0.0);
+  float wSum = 0.0;
+  float aw = 0.0;
+  for (int k = 0; k < ${SLOTS}; k++) {
+    vec4 g = uLgPoints[k];
+    if (g.w < 0.5) continue;
+    vec3 dir = P - g.xyz;
+    int d = 0;
+    float z = -1e30;
+    for (int j = 0; j < 6; j++) {
+      float t = dot(dir, uLgForward[j]);
+      if (t > z) { z = t; d = j; }
+    }
+    int layer = k * 6 + d;
+    vec4 info = uLgLayers[layer];
+    if (info.x < 0.5 || z <= 0.0) continue;
+    vec3 f = uLgForward[d];
+    vec3 r = normalize(cross(f, uLgUp[d]));
+    vec3 u = cross(r, f);
+    vec2 uv = vec2(0.5 + 0.5 * dot(dir, r) / z, 0.5 - 0.5 * dot(dir, u) / z);
+    int side = int(uLgDepthSide);
+    vec3 dz = texelFetch(uLgDepth, ivec3(clamp(ivec2(uv * uLgDepthSide), ivec2(0), ivec2(side - 1)), layer), 0).rgb;
+    float q = floor(dz.r * 255.0 + 0.5) * 256.0 + floor(dz.g * 255.0 + 0.5);
+    if (q >= 65535.0) continue;
+    float seen = info.y + q / 65534.0 * (info.z - info.y);
+    if (abs(z - seen) > uLgTolerance + z * 8.0 * uLgPixel) continue;
+    float c = dot(normalize(-dir), V);
+    if (c <= 0.0) continue;
+    float w = exp(uLgSharpness * (c - 1.0)) + 1e-6;
+    vec3 n = texture(uLgNormal, vec3(uv, float(layer))).rgb * 2.0 - 1.0;
+    if (dot(n, V) < 0.0) n = -n;
+    nSum += w * n;
+    if (info.w > 0.5) {
+      aSum += w * texture(uLgAlbedo, vec3(uv, float(layer))).rgb;
+      aw += w;
+    }
+    wSum += w;
+  }
+  if (wSum <= 0.0 || dot(nSum, nSum) < 1e-12) return false;
+  normal = normalize(nSum);
+  hasAlbedo = aw > 0.0 ? 1.0 : 0.0;
+  albedo = aw > 0.0 ? aSum / aw : vec3(0.0);
+  return true;
+}
+#endif
 void main() {
   vec3 v = normalize(cameraPosition - vWorld);
   vec3 n = vNormal;
   float l = length(n);
   n = l > 1e-20 ? n / l : v;
   if (!gl_FrontFacing) n = -n;
-  float ndl = uLightMode > 0.5 ? max(dot(n, uLight), 0.0) : abs(dot(n, v));
   vec3 albedo = uTextured > 0.5 ? textureLod(uMap, vUv, 0.0).rgb : vColor.rgb;
+#ifdef LUMIGRAPH
+  vec3 lgAlbedo;
+  vec3 lgNormal;
+  float lgHasAlbedo;
+  if (lumigraph(vWorld, v, lgAlbedo, lgNormal, lgHasAlbedo)) {
+    n = lgNormal;
+    if (lgHasAlbedo > 0.5) albedo = lgAlbedo;
+  }
+#endif
+  float ndl = uLightMode > 0.5 ? max(dot(n, uLight), 0.0) : abs(dot(n, v));
   vec3 rgb = albedo * (uAmbient + (1.0 - uAmbient) * ndl);
   if (vMark.y > 0.5) rgb = mix(rgb, uSelectTint.rgb, uSelectTint.a);
   else if (vMark.x > 0.5) rgb = mix(rgb, uHoverTint.rgb, uHoverTint.a);
@@ -174,6 +248,36 @@ export class SceneView {
     this.renderer.setClearColor(color, 1);
   }
 
+  /**
+   * Image-based mode: the repository's images (`repo`, ../lumigraph/repository.js) shade the
+   * patches drawn, which are then only the sparse mesh; `null` switches back.
+   */
+  setLumigraph(repo) {
+    const u = this.material.uniforms;
+    for (const k of Object.keys(u)) if (k.startsWith('uLg')) delete u[k];
+    this.material.defines = {};
+    if (repo) {
+      Object.assign(u, {
+        uLgAlbedo: { value: repo.albedo },
+        uLgNormal: { value: repo.normal },
+        uLgDepth: { value: repo.depth },
+        uLgPoints: { value: repo.points },
+        uLgLayers: { value: repo.layerInfo },
+        uLgForward: { value: repo.forward },
+        uLgUp: { value: repo.up },
+        uLgTolerance: { value: 0 },
+        uLgSharpness: { value: 40 },
+        uLgDepthSide: { value: repo.depthSide },
+        uLgPixel: { value: 1 / repo.side },
+      });
+      this.lumigraphSlack = repo.spacing * 0.002;
+      this.material.defines = { LUMIGRAPH: 1 };
+    }
+    this.lumigraph = repo;
+    this.material.needsUpdate = true;
+    this.material.uniformsNeedUpdate = true;
+  }
+
   /** Matches the drawing buffer to the container's size. */
   resize() {
     const w = Math.max(1, this.container.clientWidth);
@@ -215,6 +319,11 @@ export class SceneView {
       if (material === this.material) {
         // The shared material's texture uniforms follow the mesh drawn (uploaded on change).
         const u = material.uniforms;
+        if (u.uLgTolerance) {
+          // The sparse patch lies within its error of the surface the images saw.
+          u.uLgTolerance.value = 1.5 * this.table.lodError[node] + this.lumigraphSlack;
+          material.uniformsNeedUpdate = true;
+        }
         const tex = mesh.userData.texture;
         const map = tex || this.noTexture;
         const on = tex ? 1 : 0;
@@ -322,6 +431,8 @@ export class SceneView {
   /** Renders; `outline` (0 none, 1 hovered, 2 selected) draws the bold boundary. */
   render(outline = 0) {
     this.fitClipPlanes();
+    // The repository's points and layers change as images arrive.
+    if (this.lumigraph) this.material.uniformsNeedUpdate = true;
     if (this.material.uniforms.uLightMode.value > 0.5) {
       // Raking light, fixed to the view: from the upper left, grazing the surface facing us.
       const m = this.camera.matrixWorld.elements;

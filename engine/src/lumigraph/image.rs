@@ -1,0 +1,452 @@
+//! One image of the repository as stored and served (system paper §5.2.2, with what §5.1's
+//! reconstruction needs to be correct).
+//!
+//! The paper stores shaded JPEGs. A shaded image carries the light of the camera that took
+//! it, so a view reconstructed from several of them shows their lights, not its own. Each
+//! image here carries the surface instead: its *albedo* (omitted for models without colours
+//! or texture, whose albedo is the base colour), its *normals* (world space, facing the
+//! camera) and its *view depth*. A client shades the reconstructed surface under its own light
+//! exactly as the server does (`ambient + (1 − ambient)·|n·v|`), and projects an image only
+//! onto points at the depth the image saw (Fig. 15's projective texture mapping, with a
+//! visibility test). Background pixels take the colour of the nearest surface (a few pixels
+//! of dilation) so neither JPEG ringing nor bilinear filtering bleeds background into the
+//! silhouette.
+//!
+//! Layout (little endian; see docs/FORMAT.md, "Lumigraph image"):
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `MWLI` |
+//! | 4 | 1 | version (1) |
+//! | 5 | 1 | flags: bit 0 albedo present |
+//! | 6 | 2 | side of the colour images (pixels) |
+//! | 8 | 2 | side of the depth image |
+//! | 10 | 2 | reserved (0) |
+//! | 12 | 4 | f32 nearest depth `d0` |
+//! | 16 | 4 | f32 farthest depth `d1` |
+//! | 20 | 4 | u32 albedo bytes `a` (0 without albedo) |
+//! | 24 | 4 | u32 normal bytes `n` |
+//! | 28 | 4 | u32 depth bytes `z` |
+//! | 32 | a | albedo: baseline JPEG, RGB |
+//! | 32 + a | n | normals: baseline JPEG 4:4:4, `rgb = (n + 1) / 2` |
+//! | 32 + a + n | z | depth: PNG, RGB8; `q = 256·r + g`, 65535 = no surface, else depth `d0 + q / 65534 · (d1 − d0)` |
+//!
+//! The depth image is half the colour side; each of its pixels holds the nearest depth of
+//! the 2×2 colour pixels it covers (a conservative visibility test).
+
+use image::ImageEncoder;
+use image::codecs::png::PngEncoder;
+
+/// Magic bytes.
+pub const MAGIC: &[u8; 4] = b"MWLI";
+/// Format version.
+pub const VERSION: u8 = 1;
+/// Header bytes.
+pub const HEADER: usize = 32;
+/// Depth code of a pixel without surface.
+pub const NO_DEPTH: u16 = u16::MAX;
+/// Pixels of dilation around the surface in the colour images.
+const DILATE: usize = 4;
+
+/// Why an image cannot be encoded or decoded.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("lumigraph image: {0}")]
+    Malformed(String),
+    #[error("lumigraph image: {0}")]
+    Codec(#[from] image::ImageError),
+}
+
+/// A decoded repository image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LumigraphImage {
+    /// Side of the colour images.
+    pub side: u32,
+    /// Albedo (RGB), `side`², or none (the model's base colour).
+    pub albedo: Option<Vec<[u8; 3]>>,
+    /// Normals encoded as `(n + 1) / 2` bytes, `side`².
+    pub normal: Vec<[u8; 3]>,
+    /// Side of the depth image.
+    pub depth_side: u32,
+    /// Depth codes, `depth_side`² ([`NO_DEPTH`] where no surface was seen).
+    pub depth: Vec<u16>,
+    /// Depth of code 0 and of code 65534.
+    pub depth_range: [f32; 2],
+}
+
+impl LumigraphImage {
+    /// View depth at depth pixel `i` (`None` where no surface was seen).
+    pub fn depth_at(&self, i: usize) -> Option<f32> {
+        let q = *self.depth.get(i)?;
+        (q != NO_DEPTH).then(|| {
+            let [d0, d1] = self.depth_range;
+            d0 + q as f32 / (NO_DEPTH - 1) as f32 * (d1 - d0)
+        })
+    }
+}
+
+/// Fraction of a frame's pixels that show surface (finite depth).
+pub fn coverage(depth: &[f32]) -> f32 {
+    if depth.is_empty() {
+        return 0.0;
+    }
+    depth.iter().filter(|d| d.is_finite()).count() as f32 / depth.len() as f32
+}
+
+/// Encodes a square render (`side`², its albedo, facing normals and linear view depth) as a
+/// repository image; `None` when it shows no surface (the repository's "empty" flag).
+/// `albedo` is `None` for models without colours or texture.
+pub fn encode(
+    side: u32,
+    albedo: Option<&[[u8; 4]]>,
+    normal: &[[f32; 3]],
+    depth: &[f32],
+    quality: u8,
+) -> Result<Option<Vec<u8>>, ImageError> {
+    let px = side as usize * side as usize;
+    if side < 2
+        || side > u16::MAX as u32
+        || normal.len() != px
+        || depth.len() != px
+        || albedo.is_some_and(|a| a.len() != px)
+    {
+        return Err(ImageError::Malformed(format!(
+            "buffers do not match a {side}x{side} image"
+        )));
+    }
+    let covered: Vec<bool> = depth.iter().map(|d| d.is_finite()).collect();
+    if !covered.iter().any(|&c| c) {
+        return Ok(None);
+    }
+    let normals: Vec<[u8; 3]> = normal
+        .iter()
+        .map(|n| n.map(|c| ((c.clamp(-1.0, 1.0) + 1.0) * 127.5).round() as u8))
+        .collect();
+    let normals = dilate(&normals, &covered, side as usize);
+    let albedo = albedo.map(|a| {
+        let rgb: Vec<[u8; 3]> = a.iter().map(|p| [p[0], p[1], p[2]]).collect();
+        dilate(&rgb, &covered, side as usize)
+    });
+    let albedo_jpeg = match &albedo {
+        Some(a) => jpeg(a, side, quality, jpeg_encoder::SamplingFactor::F_2_2)?,
+        None => Vec::new(),
+    };
+    let normal_jpeg = jpeg(&normals, side, quality, jpeg_encoder::SamplingFactor::F_1_1)?;
+    let (depth_side, codes, range) = quantise_depth(depth, side as usize);
+    let mut rgb = Vec::with_capacity(codes.len() * 3);
+    for q in &codes {
+        rgb.extend_from_slice(&[(q >> 8) as u8, (q & 0xFF) as u8, 0]);
+    }
+    let mut depth_png = Vec::new();
+    PngEncoder::new_with_quality(
+        &mut depth_png,
+        image::codecs::png::CompressionType::Best,
+        image::codecs::png::FilterType::Adaptive,
+    )
+    .write_image(
+        &rgb,
+        depth_side as u32,
+        depth_side as u32,
+        image::ExtendedColorType::Rgb8,
+    )?;
+    let mut out =
+        Vec::with_capacity(HEADER + albedo_jpeg.len() + normal_jpeg.len() + depth_png.len());
+    out.extend_from_slice(MAGIC);
+    out.push(VERSION);
+    out.push(u8::from(albedo.is_some()));
+    out.extend_from_slice(&(side as u16).to_le_bytes());
+    out.extend_from_slice(&(depth_side as u16).to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    out.extend_from_slice(&range[0].to_le_bytes());
+    out.extend_from_slice(&range[1].to_le_bytes());
+    for len in [albedo_jpeg.len(), normal_jpeg.len(), depth_png.len()] {
+        out.extend_from_slice(&(len as u32).to_le_bytes());
+    }
+    out.extend_from_slice(&albedo_jpeg);
+    out.extend_from_slice(&normal_jpeg);
+    out.extend_from_slice(&depth_png);
+    Ok(Some(out))
+}
+
+/// Decodes a repository image.
+pub fn decode(bytes: &[u8]) -> Result<LumigraphImage, ImageError> {
+    let bad = |m: &str| ImageError::Malformed(m.to_string());
+    if bytes.len() < HEADER || &bytes[0..4] != MAGIC {
+        return Err(bad(
+            "not a lumigraph image (bad magic or shorter than its header)",
+        ));
+    }
+    if bytes[4] != VERSION {
+        return Err(bad(&format!("unsupported version {}", bytes[4])));
+    }
+    let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);
+    let u32_at =
+        |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
+    let f32_at = |o: usize| f32::from_bits(u32_at(o));
+    let (side, depth_side) = (u16_at(6) as u32, u16_at(8) as u32);
+    let range = [f32_at(12), f32_at(16)];
+    let lens = [
+        u32_at(20) as usize,
+        u32_at(24) as usize,
+        u32_at(28) as usize,
+    ];
+    let total = lens
+        .iter()
+        .try_fold(HEADER, |a, &l| a.checked_add(l))
+        .ok_or_else(|| bad("section lengths overflow"))?;
+    if total != bytes.len() {
+        return Err(bad(&format!(
+            "sections hold {total} bytes, the image has {}",
+            bytes.len()
+        )));
+    }
+    if side < 2 || depth_side == 0 || !range.iter().all(|r| r.is_finite()) {
+        return Err(bad("bad sizes or depth range"));
+    }
+    let has_albedo = bytes[5] & 1 != 0;
+    if has_albedo != (lens[0] > 0) {
+        return Err(bad("albedo flag and section disagree"));
+    }
+    let a_end = HEADER + lens[0];
+    let n_end = a_end + lens[1];
+    let rgb = |data: &[u8], s: u32| -> Result<Vec<[u8; 3]>, ImageError> {
+        let img = image::load_from_memory(data)?.to_rgb8();
+        if img.dimensions() != (s, s) {
+            return Err(bad("a section's size differs from the header's"));
+        }
+        Ok(img
+            .into_raw()
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect())
+    };
+    let albedo = if has_albedo {
+        Some(rgb(&bytes[HEADER..a_end], side)?)
+    } else {
+        None
+    };
+    let normal = rgb(&bytes[a_end..n_end], side)?;
+    let depth = rgb(&bytes[n_end..], depth_side)?
+        .into_iter()
+        .map(|p| u16::from(p[0]) << 8 | u16::from(p[1]))
+        .collect();
+    Ok(LumigraphImage {
+        side,
+        albedo,
+        normal,
+        depth_side,
+        depth,
+        depth_range: range,
+    })
+}
+
+/// Baseline JPEG with the standard Huffman tables (see `lod::atlas::encode_jpeg`).
+fn jpeg(
+    rgb: &[[u8; 3]],
+    side: u32,
+    quality: u8,
+    sampling: jpeg_encoder::SamplingFactor,
+) -> Result<Vec<u8>, ImageError> {
+    let s = u16::try_from(side).map_err(|_| ImageError::Malformed("image too large".into()))?;
+    let mut out = Vec::new();
+    let mut encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
+    encoder.set_sampling_factor(sampling);
+    encoder
+        .encode(rgb.as_flattened(), s, s, jpeg_encoder::ColorType::Rgb)
+        .map_err(|e| ImageError::Malformed(format!("JPEG encoding failed: {e}")))?;
+    Ok(out)
+}
+
+/// Grows the covered pixels' values [`DILATE`] pixels into the background (each new pixel the
+/// mean of its covered 4-neighbours); farther background keeps the mean surface value.
+fn dilate(values: &[[u8; 3]], covered: &[bool], side: usize) -> Vec<[u8; 3]> {
+    let mut out = values.to_vec();
+    let mut done = covered.to_vec();
+    for _ in 0..DILATE {
+        let mut next = done.clone();
+        for y in 0..side {
+            for x in 0..side {
+                let i = y * side + x;
+                if done[i] {
+                    continue;
+                }
+                let mut sum = [0u32; 3];
+                let mut n = 0;
+                let mut add = |j: usize| {
+                    if done[j] {
+                        for k in 0..3 {
+                            sum[k] += out[j][k] as u32;
+                        }
+                        n += 1;
+                    }
+                };
+                if x > 0 {
+                    add(i - 1);
+                }
+                if x + 1 < side {
+                    add(i + 1);
+                }
+                if y > 0 {
+                    add(i - side);
+                }
+                if y + 1 < side {
+                    add(i + side);
+                }
+                if n > 0 {
+                    out[i] = sum.map(|s| ((s + n / 2) / n) as u8);
+                    next[i] = true;
+                }
+            }
+        }
+        done = next;
+    }
+    let (mut sum, mut n) = ([0u64; 3], 0u64);
+    for (v, c) in values.iter().zip(covered) {
+        if *c {
+            for k in 0..3 {
+                sum[k] += v[k] as u64;
+            }
+            n += 1;
+        }
+    }
+    let mean = sum.map(|s| (s / n.max(1)) as u8);
+    for (v, d) in out.iter_mut().zip(&done) {
+        if !d {
+            *v = mean;
+        }
+    }
+    out
+}
+
+/// Half-resolution depth codes (each the nearest of its 2×2 pixels) and their range.
+fn quantise_depth(depth: &[f32], side: usize) -> (usize, Vec<u16>, [f32; 2]) {
+    let half = side.div_ceil(2);
+    let mut near = vec![f32::INFINITY; half * half];
+    for y in 0..side {
+        for x in 0..side {
+            let d = depth[y * side + x];
+            let h = &mut near[(y / 2) * half + x / 2];
+            if d < *h {
+                *h = d;
+            }
+        }
+    }
+    let finite = near.iter().filter(|d| d.is_finite());
+    let d0 = finite.clone().fold(f32::INFINITY, |a, &b| a.min(b));
+    let d1 = finite.fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+    let (d0, d1) = if d0.is_finite() {
+        (d0, d1.max(d0))
+    } else {
+        (0.0, 0.0)
+    };
+    let scale = if d1 > d0 {
+        (NO_DEPTH - 1) as f32 / (d1 - d0)
+    } else {
+        0.0
+    };
+    let codes = near
+        .iter()
+        .map(|&d| {
+            if d.is_finite() {
+                ((d - d0) * scale).round().clamp(0.0, (NO_DEPTH - 1) as f32) as u16
+            } else {
+                NO_DEPTH
+            }
+        })
+        .collect();
+    (half, codes, [d0, d1])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sphere of radius 0.5 at distance 2 seen head-on: its depth, normals and a
+    /// left/right albedo.
+    fn sphere(side: u32) -> (Vec<[u8; 4]>, Vec<[f32; 3]>, Vec<f32>) {
+        let s = side as usize;
+        let (mut a, mut n, mut d) = (
+            vec![[0; 4]; s * s],
+            vec![[0.0; 3]; s * s],
+            vec![f32::INFINITY; s * s],
+        );
+        for y in 0..s {
+            for x in 0..s {
+                let u = (x as f32 + 0.5) / s as f32 * 2.0 - 1.0;
+                let v = (y as f32 + 0.5) / s as f32 * 2.0 - 1.0;
+                let r2 = u * u + v * v;
+                if r2 < 1.0 {
+                    let z = (1.0 - r2).sqrt();
+                    let i = y * s + x;
+                    n[i] = [u, -v, z];
+                    d[i] = 2.0 - 0.5 * z;
+                    a[i] = if u < 0.0 {
+                        [200, 40, 40, 255]
+                    } else {
+                        [40, 40, 200, 255]
+                    };
+                }
+            }
+        }
+        (a, n, d)
+    }
+
+    #[test]
+    fn round_trip_keeps_albedo_normals_and_depth() {
+        let side = 64;
+        let (a, n, d) = sphere(side);
+        let bytes = encode(side, Some(&a), &n, &d, 90).unwrap().unwrap();
+        let img = decode(&bytes).unwrap();
+        assert_eq!((img.side, img.depth_side), (64, 32));
+        let albedo = img.albedo.as_ref().unwrap();
+        // Inside the sphere, away from its rim, colours and normals survive JPEG.
+        let centre_left = 32 * 64 + 20;
+        assert!(albedo[centre_left][0] > 150 && albedo[centre_left][2] < 90);
+        let nz = img.normal[32 * 64 + 32][2] as f32 / 127.5 - 1.0;
+        assert!(nz > 0.95, "{nz}");
+        // Depth: within a quantisation step, and nearest of each 2x2 block.
+        let got = img.depth_at(16 * 32 + 16).unwrap();
+        let want = [
+            d[32 * 64 + 32],
+            d[32 * 64 + 33],
+            d[33 * 64 + 32],
+            d[33 * 64 + 33],
+        ]
+        .into_iter()
+        .fold(f32::INFINITY, f32::min);
+        assert!((got - want).abs() < 1e-4, "{got} vs {want}");
+        assert_eq!(img.depth_at(0), None);
+        // Without albedo the section is absent and smaller.
+        let plain = encode(side, None, &n, &d, 90).unwrap().unwrap();
+        assert!(plain.len() < bytes.len());
+        assert!(decode(&plain).unwrap().albedo.is_none());
+    }
+
+    #[test]
+    fn an_image_of_nothing_is_empty_and_bad_input_is_an_error() {
+        let s = 16;
+        let d = vec![f32::INFINITY; 256];
+        assert!(encode(s, None, &[[0.0; 3]; 256], &d, 80).unwrap().is_none());
+        assert_eq!(coverage(&d), 0.0);
+        assert!(encode(s, None, &[[0.0; 3]; 10], &d, 80).is_err());
+        let (a, n, d) = sphere(32);
+        let bytes = encode(32, Some(&a), &n, &d, 80).unwrap().unwrap();
+        assert!(decode(&bytes[..bytes.len() - 1]).is_err());
+        assert!(decode(&bytes[..10]).is_err());
+        let mut wrong = bytes.clone();
+        wrong[0] = b'X';
+        assert!(decode(&wrong).is_err());
+        let mut flag = bytes.clone();
+        flag[5] = 0;
+        assert!(decode(&flag).is_err());
+        // Every truncation and single-byte flip is an error or an image, never a panic.
+        for cut in (0..bytes.len()).step_by(7) {
+            let _ = decode(&bytes[..cut]);
+        }
+        for at in (0..bytes.len()).step_by(13) {
+            let mut b = bytes.clone();
+            b[at] ^= 0x5A;
+            let _ = decode(&b);
+        }
+    }
+}

@@ -1,0 +1,98 @@
+// The network mode (issue 12): a viewer account opens a model whose geometry stays on the
+// server. The page shows the model image-based — the sparse mesh shaded by the model's
+// Grid-Lumigraph images — with its parts and callouts; no request of the page is refused (the
+// viewer asks for no patch finer than the sparse mesh and never for the whole file); the
+// frame matches the server's full-resolution render of the same camera more closely than the
+// sparse mesh alone does.
+
+import { after, before, test } from 'node:test';
+import assert from 'node:assert/strict';
+import { mkdtempSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+
+import { writeRelief } from './support/env.mjs';
+import { importScan, seedPart, startServer } from './support/server.mjs';
+import { launch, login, poll, waitViewer } from './support/browser.mjs';
+import { capture, compareWithImage } from './support/pixels.mjs';
+
+let server;
+let browser;
+let tmp;
+
+before(async () => {
+  tmp = mkdtempSync(join(tmpdir(), 'mw-lumigraph-'));
+  server = await startServer();
+  browser = await launch();
+});
+
+after(async () => {
+  await browser?.close();
+  await server?.stop();
+  if (tmp) rmSync(tmp, { recursive: true, force: true });
+});
+
+async function waitJob(id) {
+  for (let k = 0; k < 1200; k++) {
+    const j = await server.api.get(`/api/v1/jobs/${id}`);
+    if (j.status === 'done') return j;
+    if (j.status === 'failed' || j.status === 'cancelled') throw new Error(`job ${id} ${j.status}: ${j.message}`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  throw new Error(`job ${id} did not finish`);
+}
+
+test('a model whose geometry stays on the server is seen image-based, with its parts and callouts', { timeout: 600_000 }, async (t) => {
+  const model = await importScan(server.api, writeRelief(join(tmp, 'relief.ply'), 200), 'Guarded relief');
+  const { part } = await seedPart(server.api, model.id, { title: 'Guarded rosette', body: 'On the relief.', vertexIds: [0, 1, 2, 200, 201, 202], center: [-0.5, -0.5, 0] });
+  const started = await server.api.post(`/api/v1/models/${model.id}/lumigraph`, { grid: 5, size: 256 });
+  const job = await waitJob(started.job.id);
+  t.diagnostic(`repository: ${JSON.stringify(job.report)}`);
+  await server.api.request('PATCH', `/api/v1/models/${model.id}`, { json: { geometry_access: 'sparse' } });
+  await server.api.post('/api/v1/users', { username: 'vicky', password: 'vicky-password-1', role: 'viewer' });
+
+  const page = await browser.page();
+  const refused = [];
+  const patches = [];
+  page.on('response', (r) => {
+    if (r.status() === 401 || r.status() === 403) refused.push(`${r.status()} ${r.url()}`);
+    const m = /\/lod\/patches\/(\d+)/.exec(r.url());
+    if (m) patches.push(Number(m[1]));
+  });
+  await login(page, server.base, { username: 'vicky', password: 'vicky-password-1' });
+  await page.goto(`${server.base}/models/${model.id}`);
+  const settled = (s) => s.mode === 'image' && s.lumigraph && s.lumigraph.images > 0 && s.settled && s.triangles > 0;
+  const s = await waitViewer(page, settled, 300_000);
+  t.diagnostic(`image-based: ${s.drawn} patches, ${s.triangles} triangles, ${s.bytes} patch bytes, ${JSON.stringify(s.lumigraph)}`);
+  assert.deepEqual(refused, [], 'no request of the page was refused');
+  assert.ok(s.lumigraph.bytes > 0 && s.lumigraph.layers > 0);
+
+  // Only the sparse mesh came: a fraction of the scan's triangles.
+  const lod = await server.api.get(`/api/v1/models/${model.id}/lod`);
+  const desc = await server.api.get(`/api/v1/models/${model.id}/lumigraph`);
+  for (const n of patches) {
+    const node = lod.nodes[n];
+    assert.ok(node.parent_error === null || node.parent_error > desc.sparse.error, `patch ${n} is finer than the sparse mesh`);
+  }
+  assert.ok(s.triangles < model.triangle_count / 4, `${s.triangles} of ${model.triangle_count} triangles drawn`);
+
+  // The part's callout and information.
+  await poll(page, () => window.meshwikiViewer.stats().callouts, (c) => c.includes(part.id));
+  assert.match(await page.textContent('body'), /Guarded rosette/);
+
+  // Against the server's full-resolution render of the same camera.
+  const frame = await capture(page, 'image');
+  const cam = await page.evaluate(() => window.meshwikiViewer.camera());
+  const q = new URLSearchParams({ eye: cam.eye.join(','), target: cam.target.join(','), up: cam.up.join(','), fovy: String(cam.fovy), w: String(frame.width), h: String(frame.height) });
+  const url = `/api/v1/models/${model.id}/render?${q}`;
+  const image = await compareWithImage(page, 'image', url);
+  // The same frame without the images: the sparse mesh's own shading.
+  await page.evaluate(() => window.meshwikiViewer.setImageShading(false));
+  await capture(page, 'sparse');
+  const sparse = await compareWithImage(page, 'sparse', url);
+  await page.evaluate(() => window.meshwikiViewer.setImageShading(true));
+  t.diagnostic(`against the full-resolution render: image-based IoU ${image.iou.toFixed(3)}, mean difference ${image.meanAbsDiff.toFixed(2)}; sparse mesh alone ${sparse.meanAbsDiff.toFixed(2)}`);
+  assert.ok(image.iou > 0.95, `silhouettes differ: ${JSON.stringify(image)}`);
+  assert.ok(image.meanAbsDiff < sparse.meanAbsDiff, `the images do not improve the sparse mesh: ${JSON.stringify({ image, sparse })}`);
+  await page.close();
+});
