@@ -5,10 +5,10 @@
 // Figures are printed, never asserted.
 // Usage: scripts/bench-stream [--mesh FILE] [--mbps N] [--latency MS] [--view-timeout S]
 
-import { statSync, existsSync } from 'node:fs';
+import { statSync } from 'node:fs';
 import { join } from 'node:path';
 
-import { SHARED_MESHES, sampleMesh } from '../tests/browser/support/env.mjs';
+import { cameraPath, pickMesh } from './bench-path.mjs';
 import { ADMIN, importScan, startServer } from '../tests/browser/support/server.mjs';
 import { launch, login, poll, waitViewer } from '../tests/browser/support/browser.mjs';
 import { leafVertices, regionAt } from '../tests/browser/support/regions.mjs';
@@ -22,35 +22,6 @@ const MBPS = Number(opt('mbps', '16'));
 const LATENCY_MS = Number(opt('latency', '20'));
 // Software GL draws a few hundred thousand triangles per second: large scans need longer.
 const VIEW_TIMEOUT = Number(opt('view-timeout', '180')) * 1000;
-
-function pickMesh() {
-  const given = opt('mesh', null);
-  if (given) return { path: given, name: given.split('/').pop(), real: true };
-  for (const name of ['stanford_dragon_vrip_871k.ply', 'stanford_armadillo_346k.ply', 'igea_269k.ply']) {
-    const p = join(SHARED_MESHES, name);
-    if (existsSync(p)) return { path: p, name, real: true };
-  }
-  return sampleMesh('/tmp');
-}
-
-const add = (a, b) => a.map((v, k) => v + b[k]);
-const scale = (a, s) => a.map((v) => v * s);
-const round = (c) => ({ ...c, eye: c.eye.map((v) => Number(v.toPrecision(7))), target: c.target.map((v) => Number(v.toPrecision(7))) });
-
-/** The fixed path: whole model, an orbit, then closer and closer to a surface point, a pan. */
-function cameraPath(center, radius, p) {
-  const far = radius / Math.sin((20 * Math.PI) / 180) * 1.05;
-  const rot = (deg) => [Math.sin((deg * Math.PI) / 180), 0, Math.cos((deg * Math.PI) / 180)];
-  const toward = (d) => ({ eye: add(p, [0, 0.1 * d, d]), target: p, up: [0, 1, 0], fovy: 40 });
-  return [
-    { name: 'whole model', eye: add(center, scale(rot(0), far)), target: center, up: [0, 1, 0], fovy: 40 },
-    { name: 'orbit 50°', eye: add(center, scale(rot(50), far)), target: center, up: [0, 1, 0], fovy: 40 },
-    { name: 'approach', ...toward(1.0 * radius) },
-    { name: 'closer', ...toward(0.45 * radius) },
-    { name: 'close-up', ...toward(0.2 * radius) },
-    { name: 'pan', eye: add(toward(0.2 * radius).eye, [0.08 * radius, 0, 0]), target: add(p, [0.08 * radius, 0, 0]), up: [0, 1, 0], fovy: 40 },
-  ].map(round);
-}
 
 async function run(server, model, path, probe, fovea) {
   const browser = await launch();
@@ -105,7 +76,7 @@ async function run(server, model, path, probe, fovea) {
 const mb = (b) => (b / 1e6).toFixed(2).padStart(7);
 
 async function main() {
-  const mesh = pickMesh();
+  const mesh = pickMesh(opt('mesh', null));
   const server = await startServer();
   try {
     const t = Date.now();

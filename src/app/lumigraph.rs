@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use glam::Vec3;
-use meshwiki_engine::lumigraph::{DIRECTIONS, Grid};
+use meshwiki_engine::lumigraph::{DIRECTIONS, Grid, image};
 use serde::Serialize;
 use utoipa::ToSchema;
 
@@ -57,6 +57,8 @@ pub struct LumigraphDescription {
     pub grid: Option<u32>,
     /// Image side in pixels.
     pub size: Option<u32>,
+    /// Side of each image's depth section in pixels.
+    pub depth_size: Option<u32>,
     /// The viewing box the grid spans corner to corner (none until the model is ready).
     #[serde(rename = "box")]
     pub viewing_box: Option<ViewingBox>,
@@ -138,6 +140,7 @@ impl super::App {
             status: repo.as_ref().map_or(LumigraphStatus::None, |r| r.status),
             grid: repo.as_ref().map(|r| r.grid),
             size: repo.as_ref().map(|r| r.size),
+            depth_size: repo.as_ref().map(|r| image::depth_side(r.size)),
             viewing_box: repo.as_ref().and(viewing_box),
             spacing: repo.as_ref().and(spacing),
             fov_deg: 90.0,
@@ -202,10 +205,7 @@ impl super::App {
         match lumigraph::entry(&self.db, model_id, key).await? {
             None => Err(AppError::NotFound(format!(
                 "image ({x}, {y}, {z}, {d}) is not rendered yet (the repository is {})",
-                serde_json::to_value(repo.status)
-                    .ok()
-                    .and_then(|v| v.as_str().map(str::to_string))
-                    .unwrap_or_default()
+                repo.status.as_str()
             ))),
             Some(Entry::Empty | Entry::Inside) => Ok(LumigraphImage::Empty),
             Some(Entry::Image { sha256, .. }) => {

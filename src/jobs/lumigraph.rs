@@ -30,7 +30,7 @@ pub const DEFAULT_GRID: u32 = 6;
 /// Image side when the request names none (the paper's).
 pub const DEFAULT_SIZE: u32 = 512;
 /// JPEG quality of the albedo and normal images.
-pub const QUALITY: u8 = 85;
+pub const QUALITY: u8 = 80;
 
 /// Checks a requested grid: points per axis and image side within the engine's bounds.
 pub fn check_request(grid: u32, size: u32) -> Result<(), JobError> {

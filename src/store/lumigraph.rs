@@ -31,6 +31,17 @@ pub enum LumigraphStatus {
 }
 
 impl LumigraphStatus {
+    /// Name as served.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LumigraphStatus::None => "none",
+            LumigraphStatus::Queued => "queued",
+            LumigraphStatus::Building => "building",
+            LumigraphStatus::Ready => "ready",
+            LumigraphStatus::Failed => "failed",
+        }
+    }
+
     fn parse(s: &str) -> LumigraphStatus {
         match s {
             "queued" => LumigraphStatus::Queued,

@@ -52,6 +52,16 @@ pub enum GeometryAccess {
     Sparse,
 }
 
+impl GeometryAccess {
+    /// Name as stored.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            GeometryAccess::Full => "full",
+            GeometryAccess::Sparse => "sparse",
+        }
+    }
+}
+
 /// Axis-aligned bounding box.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BBox {

@@ -65,7 +65,7 @@ pub struct LumigraphRequest {
 /// The queued build.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct LumigraphStarted {
-    /// The repository (status `queued`).
+    /// The repository (status `queued`, or `building` once a worker has taken the job).
     pub lumigraph: LumigraphDescription,
     /// The job that builds it (progress, cancel: `/api/v1/jobs/{id}`).
     pub job: Job,

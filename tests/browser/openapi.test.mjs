@@ -252,6 +252,24 @@ test('every operation answers as documented on a running server', { timeout: 600
   await call('get', '/api/v1/contents/{id}/attachments', { id: second.id }, { expect: 200 });
   await call('delete', '/api/v1/contents/{id}/attachments/{attachment_id}', { id: second.id, attachment_id: attachment.id }, { expect: 204 });
 
+  // The network mode: a small image repository, its images, a refused grid.
+  await call('get', '/api/v1/models/{id}/lumigraph', { id: modelId }, { expect: 200 });
+  await call('post', '/api/v1/models/{id}/lumigraph', { id: modelId }, { json: { grid: 0 }, expect: 400 });
+  const repo = (await call('post', '/api/v1/models/{id}/lumigraph', { id: modelId }, { json: { grid: 2, size: 32 }, expect: 202 })).data;
+  for (let k = 0; k < 600; k++) {
+    const j = (await call('get', '/api/v1/jobs/{id}', { id: repo.job.id }, { expect: 200 })).data;
+    if (j.status === 'done') break;
+    assert.ok(j.status === 'queued' || j.status === 'running', `repository job ${j.status}: ${j.message}`);
+    await new Promise((r) => setTimeout(r, 200));
+  }
+  const statuses = new Set();
+  for (let k = 0; k < 48; k++) {
+    const key = { id: modelId, x: k & 1, y: (k >> 1) & 1, z: (k >> 2) & 1, d: k >> 3 };
+    statuses.add((await call('get', '/api/v1/models/{id}/lumigraph/images/{x}/{y}/{z}/{d}', key)).status);
+  }
+  assert.ok(statuses.has(200), `no image among ${[...statuses]}`);
+  await call('get', '/api/v1/models/{id}/lumigraph/images/{x}/{y}/{z}/{d}', { id: modelId, x: 2, y: 0, z: 0, d: 0 }, { expect: 404 });
+
   // Search and live events.
   await call('get', '/api/v1/search', {}, { query: { q: 'apse' }, expect: 200 });
   await call('get', '/api/v1/models/{id}/events', { id: modelId }, { stream: true, expect: 200 });

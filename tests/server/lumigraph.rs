@@ -27,7 +27,9 @@ fn stored_images(data: &Path) -> usize {
 fn start(admin: &Client, model: i64, body: Value) -> i64 {
     let r = admin.post(&format!("/api/v1/models/{model}/lumigraph"), &body);
     assert_eq!(r.status, 202, "{}", r.text());
-    assert_eq!(r.json()["lumigraph"]["status"], "queued");
+    // A worker may have claimed the job before the answer was written.
+    let status = r.json()["lumigraph"]["status"].clone();
+    assert!(status == "queued" || status == "building", "{status}");
     assert_eq!(r.json()["job"]["kind"], "lumigraph");
     r.json()["job"]["id"].as_i64().unwrap()
 }
@@ -112,7 +114,8 @@ fn an_image_repository_is_built_served_rebuilt_and_deleted() {
                             );
                             assert!(r.header("cache-control").unwrap().contains("immutable"));
                             let img = lumi_image::decode(&r.body).expect("decodable image");
-                            assert_eq!((img.side, img.depth_side), (64, 32));
+                            assert_eq!((img.side, img.depth_side), (64, 16));
+                            assert_eq!(d["depth_size"], 16);
                             let seen = (0..img.depth.len())
                                 .filter(|&i| img.depth_at(i).is_some())
                                 .count();
@@ -184,14 +187,13 @@ fn an_image_repository_is_built_served_rebuilt_and_deleted() {
     )));
     let depth = buf.floats("depth");
     let (mut compared, mut agree) = (0, 0);
-    for py in 0..32usize {
-        for px in 0..32usize {
-            let Some(stored) = img.depth_at(py * 32 + px) else {
+    for py in 0..16usize {
+        for px in 0..16usize {
+            let Some(stored) = img.depth_at(py * 16 + px) else {
                 continue;
             };
-            let near = [(0, 0), (1, 0), (0, 1), (1, 1)]
-                .iter()
-                .map(|(dx, dy)| depth[(2 * py + dy) * 64 + 2 * px + dx])
+            let near = (0..16)
+                .map(|k| depth[(4 * py + k / 4) * 64 + 4 * px + k % 4])
                 .fold(f32::INFINITY, f32::min);
             if near.is_finite() {
                 compared += 1;
@@ -201,7 +203,7 @@ fn an_image_repository_is_built_served_rebuilt_and_deleted() {
             }
         }
     }
-    assert!(compared > 50, "{compared} pixels compared");
+    assert!(compared > 20, "{compared} pixels compared");
     assert!(
         agree as f64 >= 0.95 * compared as f64,
         "{agree} of {compared} depths agree with the server's render"
@@ -354,4 +356,84 @@ fn geometry_kept_on_the_server_is_refused_to_all_but_admins() {
     let r = admin.patch(&m, &json!({"geometry_access": "full"}));
     assert_eq!(r.status, 200);
     assert_eq!(viewer.get(&leaf_url).status, 200);
+}
+
+#[test]
+fn admins_set_the_access_and_build_the_repository_from_the_model_page() {
+    let dir = data_dir_with_admin();
+    let scans = tempfile::tempdir().unwrap();
+    let model = import(
+        dir.path(),
+        &relief_ply(scans.path(), "relief.ply", 8_000),
+        "Page",
+    );
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let viewer = create_user(&server, &admin, "vera", "viewer");
+    let csrf = admin.csrf.clone().unwrap();
+    let page = format!("/models/{model}");
+
+    let html = admin.get(&page).text();
+    assert!(
+        html.contains("name=\"sparse\""),
+        "access form offers the geometry setting"
+    );
+    assert!(html.contains("Build image repository"), "repository form");
+    let seen = viewer.get(&page).text();
+    assert!(!seen.contains("lumigraph-form") && !seen.contains("name=\"sparse\""));
+    let data = |html: &str| -> Value {
+        let start = html.find("id=\"viewer-data\">").unwrap() + "id=\"viewer-data\">".len();
+        let end = start + html[start..].find("</script>").unwrap();
+        serde_json::from_str(&html[start..end]).unwrap()
+    };
+    assert_eq!(data(&seen)["geometry"]["full"], true);
+
+    // The access form: geometry kept on the server (the model stays private).
+    let r = admin.post_form(
+        &format!("{page}/public"),
+        &[("csrf_token", &csrf), ("sparse", "1")],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    let m = admin.get(&format!("/api/v1/models/{model}")).json();
+    assert_eq!(
+        (m["geometry_access"].as_str(), m["public"].as_bool()),
+        (Some("sparse"), Some(false))
+    );
+    let seen = data(&viewer.get(&page).text());
+    assert_eq!(seen["geometry"]["full"], false, "{seen}");
+    assert!(seen["geometry"]["sparse_error"].as_f64().unwrap() > 0.0);
+    assert_eq!(data(&admin.get(&page).text())["geometry"]["full"], true);
+    // A viewer cannot post it.
+    let vcsrf = viewer.csrf.clone().unwrap();
+    let r = viewer.post_form(&format!("{page}/public"), &[("csrf_token", &vcsrf)]);
+    assert_eq!(r.status, 403);
+
+    // The repository form queues a job; the page then shows its status.
+    let r = viewer.post_form(
+        &format!("{page}/lumigraph"),
+        &[("csrf_token", &vcsrf), ("grid", "2"), ("size", "32")],
+    );
+    assert_eq!(r.status, 403);
+    let r = admin.post_form(
+        &format!("{page}/lumigraph"),
+        &[("csrf_token", &csrf), ("grid", "2"), ("size", "32")],
+    );
+    assert_eq!(r.status, 303, "{}", r.text());
+    let job = admin
+        .get(&format!("/api/v1/models/{model}/lumigraph"))
+        .json()["job_id"]
+        .as_i64()
+        .unwrap();
+    assert_eq!(wait_finished(&admin, job, 120)["status"], "done");
+    let html = admin.get(&page).text();
+    assert!(
+        html.contains("status-ready"),
+        "repository ready on the page"
+    );
+    assert!(html.contains("Rebuild image repository"));
+    let r = admin.post_form(
+        &format!("{page}/lumigraph"),
+        &[("csrf_token", &csrf), ("grid", "0"), ("size", "32")],
+    );
+    assert_eq!(r.status, 400, "{}", r.text());
 }

@@ -12,7 +12,7 @@ use super::filters;
 use super::{Layout, redirect, render};
 use meshwiki_engine::camera::Camera;
 
-use crate::app::lumigraph::GeometryGrant;
+use crate::app::lumigraph::{GeometryGrant, LumigraphDescription};
 use crate::app::models::Purpose;
 use crate::search::SearchHit;
 use crate::store::assignments::{self, AssignedContent};
@@ -35,6 +35,7 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     )
     .service(crate::web::resource("/models/{id}").route(web::get().to(show)))
     .service(crate::web::resource("/models/{id}/public").route(web::post().to(set_public)))
+    .service(crate::web::resource("/models/{id}/lumigraph").route(web::post().to(build_lumigraph)))
     .service(crate::web::resource("/models/{id}/edit").route(web::post().to(edit)))
     .service(crate::web::resource("/parts/{id}/contents").route(web::post().to(assign)))
     .service(
@@ -134,6 +135,9 @@ struct PublicForm {
     /// Checked: anonymous visitors may view the model.
     #[serde(default)]
     public: Option<String>,
+    /// Checked: the geometry stays on the server (`geometry_access` = `sparse`).
+    #[serde(default)]
+    sparse: Option<String>,
 }
 
 impl CsrfForm for PublicForm {
@@ -150,9 +154,45 @@ async fn set_public(
     post.auth.require(Role::Admin)?;
     let patch = models::ModelPatch {
         public: Some(post.form.public.is_some()),
+        geometry_access: Some(if post.form.sparse.is_some() {
+            models::GeometryAccess::Sparse
+        } else {
+            models::GeometryAccess::Full
+        }),
         ..Default::default()
     };
     models::update(&state.db, *id, &patch, post.auth.id()).await?;
+    Ok(redirect(&format!("/models/{}", *id)))
+}
+
+/// The image repository form of the model page (admins).
+#[derive(Debug, Deserialize)]
+struct LumigraphForm {
+    #[serde(default)]
+    csrf_token: String,
+    /// Grid points per axis.
+    grid: Option<u32>,
+    /// Image side.
+    size: Option<u32>,
+}
+
+impl CsrfForm for LumigraphForm {
+    fn csrf_token(&self) -> &str {
+        &self.csrf_token
+    }
+}
+
+/// Builds (or rebuilds) the model's image repository; the page shows the job's progress.
+async fn build_lumigraph(
+    state: web::Data<AppState>,
+    id: web::Path<i64>,
+    post: PageForm<LumigraphForm>,
+) -> Result<HttpResponse, PageError> {
+    post.auth.require(Role::Admin)?;
+    let f = &post.form;
+    state
+        .start_lumigraph(post.auth.user(), *id, f.grid, f.size)
+        .await?;
     Ok(redirect(&format!("/models/{}", *id)))
 }
 
@@ -255,6 +295,8 @@ struct ModelPage {
     build_job: Option<super::jobs::JobView>,
     /// What became of an assignment form that could not be carried out.
     assign_notice: Option<AssignNotice>,
+    /// The image repository (admins, ready models).
+    lumigraph: Option<LumigraphDescription>,
 }
 
 /// The model page's query: the outcome of an assignment form sent back to its part
@@ -416,6 +458,12 @@ async fn show(
     } else {
         None
     };
+    let is_admin = layout.user.as_ref().is_some_and(|u| u.is_admin);
+    let lumigraph = if ready && is_admin {
+        state.lumigraph(model.id).await.ok()
+    } else {
+        None
+    };
     let geometry = if ready {
         let user = reader.auth.as_ref().map(|a| a.user());
         state.geometry_grant(user, model.id).await.ok()
@@ -460,6 +508,7 @@ async fn show(
             home.as_ref(),
             geometry,
         ),
+        lumigraph,
         layout,
         description_html: markdown::render(&model.description),
         bbox,

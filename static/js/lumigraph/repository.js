@@ -10,7 +10,7 @@
 //   browser cache (the images are immutable) never mixes two builds. Empty images (204) are
 //   remembered and not asked again.
 // - Textures: layer `slot * 6 + d` of three arrays — albedo and normals at the image side,
-//   depth (16-bit code in red/green) at half of it — and per layer its depth range and whether
+//   depth (16-bit code in red/green) at `depth_size` — and per layer its depth range and whether
 //   it holds an albedo (`layerInfo`), per slot its point (`points`).
 
 import * as THREE from 'three';
@@ -41,7 +41,9 @@ export class Repository {
   /**
    * @param {number} modelId
    * @param {object} description GET /api/v1/models/{id}/lumigraph (status `ready`)
-   * @param {{onChange: Function, fetch?: Function, maxInFlight?: number}} o
+   * @param {{onChange: Function, fetch?: Function, maxInFlight?: number,
+   *   settings?: {bandwidth: number, maxWait: number}}} o `settings`: the streamer's (a user's
+   *   bandwidth cap in bytes/s, 0 for none, shared with patch streaming)
    */
   constructor(modelId, description, o) {
     this.modelId = modelId;
@@ -49,16 +51,27 @@ export class Repository {
     this.onChange = o.onChange;
     this.fetch = o.fetch || ((url, init) => fetch(url, init));
     this.maxInFlight = o.maxInFlight || 4;
+    this.settings = o.settings || { bandwidth: 0, maxWait: 1 };
+    // A request's size before it is known: the repository's mean image.
+    this.meanBytes = description.counts.images > 0 ? description.counts.bytes / description.counts.images : 32 << 10;
+    this.tokens = 0;
+    this.tokensAt = performance.now();
     this.n = description.grid;
     this.side = description.size;
-    this.depthSide = Math.ceil(description.size / 2);
+    this.depthSide = description.depth_size;
     this.min = description.box.min;
     this.spacing = description.spacing;
-    this.albedo = arrayTexture(this.side, THREE.LinearFilter);
+    // Models without colours have no albedo sections: a one-texel array until one arrives.
+    this.albedo = arrayTexture(1, THREE.LinearFilter);
     this.normal = arrayTexture(this.side, THREE.LinearFilter);
     this.depth = arrayTexture(this.depthSide, THREE.NearestFilter);
     this.points = Array.from({ length: SLOTS }, () => new THREE.Vector4(0, 0, 0, 0));
     this.layerInfo = Array.from({ length: LAYERS }, () => new THREE.Vector4(0, 0, 0, 0));
+    // The shader names a direction's face by its dominant axis: d = 2 axis + (negative).
+    description.directions.forEach((d, k) => {
+      const axis = k >> 1;
+      if (d.forward[axis] !== (k & 1 ? -1 : 1)) throw new Error(`lumigraph: direction ${k} is not along axis ${axis}`);
+    });
     this.forward = description.directions.map((d) => new THREE.Vector3(...d.forward));
     this.up = description.directions.map((d) => new THREE.Vector3(...d.up));
     this.slots = new Array(SLOTS).fill(null); // slot -> point key "x,y,z"
@@ -97,19 +110,11 @@ export class Repository {
     return cands.slice(0, SLOTS).map((c) => c.p);
   }
 
-  /** Face (0..5) of a point that sees direction `v`. */
+  /** Face (0..5) of a point that sees direction `v`: its dominant axis, `2 axis + negative`. */
   face(v) {
-    let best = 0;
-    let bestDot = -Infinity;
-    for (let d = 0; d < 6; d++) {
-      const f = this.forward[d];
-      const dot = f.x * v[0] + f.y * v[1] + f.z * v[2];
-      if (dot > bestDot) {
-        bestDot = dot;
-        best = d;
-      }
-    }
-    return best;
+    const a = [Math.abs(v[0]), Math.abs(v[1]), Math.abs(v[2])];
+    const axis = a[0] >= a[1] && a[0] >= a[2] ? 0 : a[1] >= a[2] ? 1 : 2;
+    return 2 * axis + (v[axis] >= 0 ? 0 : 1);
   }
 
   /**
@@ -136,7 +141,9 @@ export class Repository {
         const cx = b[node * 4] - g[0];
         const cy = b[node * 4 + 1] - g[1];
         const cz = b[node * 4 + 2] - g[2];
-        const r = b[node * 4 + 3];
+        // The middle of the patch's bounds (its sphere's cube shrunk by half): a face that
+        // sees only a corner of a patch's bounding cube rarely sees the patch.
+        const r = 0.5 * b[node * 4 + 3];
         for (let k = 0; k < 8; k++) count[this.face([cx + (k & 1 ? r : -r), cy + (k & 2 ? r : -r), cz + (k & 4 ? r : -r)])]++;
       }
       for (let d = 0; d < 6; d++) {
@@ -150,8 +157,23 @@ export class Repository {
     }
     wanted.sort((a, b) => a.priority - b.priority);
     this.waiting = wanted.length;
+    // A user's bandwidth cap (token bucket holding at most B·T bytes, as patch streaming's).
+    const cap = this.settings.bandwidth;
+    const now = performance.now();
+    if (cap > 0) this.tokens = Math.min(cap * this.settings.maxWait, this.tokens + ((now - this.tokensAt) / 1000) * cap);
+    this.tokensAt = now;
     for (const w of wanted) {
       if (this.inFlight.size >= this.maxInFlight) break;
+      if (cap > 0) {
+        if (this.tokens < this.meanBytes && this.inFlight.size > 0) {
+          if (!this.paceTimer) this.paceTimer = setTimeout(() => {
+            this.paceTimer = null;
+            this.onChange();
+          }, 50);
+          break;
+        }
+        this.tokens -= this.meanBytes;
+      }
       this.request(w);
     }
   }
@@ -207,7 +229,13 @@ export class Repository {
         tex.addLayerUpdate(layer);
         tex.needsUpdate = true;
       };
-      if (albedo) put(this.albedo, albedo, this.side);
+      if (albedo) {
+        if (this.albedo.image.width !== this.side) {
+          this.albedo.dispose();
+          this.albedo = arrayTexture(this.side, THREE.LinearFilter);
+        }
+        put(this.albedo, albedo, this.side);
+      }
       put(this.normal, normal, this.side);
       put(this.depth, depth, this.depthSide);
       this.layerInfo[layer].set(1, img.range[0], img.range[1], albedo ? 1 : 0);
@@ -231,6 +259,7 @@ export class Repository {
 
   close() {
     this.closed = true;
+    clearTimeout(this.paceTimer);
     for (const t of [this.albedo, this.normal, this.depth]) t.dispose();
   }
 }

@@ -17,7 +17,7 @@ import { listen } from '../parts/live.js';
 import { SceneView } from './scene.js';
 import { Navigation, framing } from './navigation.js';
 import { pick, firstHitDistance } from './picking.js';
-import { BACKGROUNDS, LIGHTING, makeToolbar } from './toolbar.js';
+import { BACKGROUNDS, LIGHTING, choice, makeToolbar } from './toolbar.js';
 import { Drawers } from './drawer.js';
 import { clearQuery, linkedPart, linkedQuery, parseCamera, writePart } from './url.js';
 import { SelectController } from '../select/controller.js';
@@ -187,7 +187,31 @@ class Viewer {
     this.land();
     this.store.loadBitmaps();
     if (!this.geometryFull || new URLSearchParams(window.location.search).get('view') === 'image') this.setMode('image');
+    this.offerModes();
     this.requestFrame();
+  }
+
+  /**
+   * The View menu's choice of geometry: full resolution, or image-based once the model has an
+   * image repository; a model that keeps its geometry on the server says so instead.
+   */
+  async offerModes() {
+    if (!this.geometryFull) {
+      const note = document.createElement('p');
+      note.className = 'viewer-keys';
+      note.textContent = 'Image-based view: the full-resolution geometry of this model stays on the server.';
+      this.toolbar.addSetting(note);
+      return;
+    }
+    try {
+      const res = await fetch(`/api/v1/models/${this.modelId}/lumigraph`, { credentials: 'same-origin' });
+      if (!res.ok || (await res.json()).status !== 'ready') return;
+    } catch {
+      return;
+    }
+    this.toolbar.addSetting(
+      choice('Geometry', 'viewer-geometry', [['model', 'Full resolution'], ['image', 'Image-based (little data, as over a slow network)']], this.mode, (v) => this.setMode(v)),
+    );
   }
 
   /**
@@ -197,6 +221,7 @@ class Viewer {
    */
   async setMode(mode) {
     if (mode === 'image') {
+      if (this.mode !== 'image') this.modelPixelError = this.streamer.settings.pixelError;
       this.mode = 'image';
       this.root.dataset.mode = 'image';
       this.streamer.setSettings({ pixelError: IMAGE_PIXEL_ERROR });
@@ -205,7 +230,7 @@ class Viewer {
           const res = await fetch(`/api/v1/models/${this.modelId}/lumigraph`, { credentials: 'same-origin' });
           const d = await res.json();
           this.lumigraphStatus = res.ok ? d.status : `HTTP ${res.status}`;
-          if (res.ok && d.status === 'ready' && !this.repo) this.repo = new Repository(this.modelId, d, { onChange: () => this.requestFrame() });
+          if (res.ok && d.status === 'ready' && !this.repo) this.repo = new Repository(this.modelId, d, { onChange: () => this.requestFrame(), settings: this.streamer.settings });
         } catch (e) {
           this.lumigraphStatus = String(e.message || e);
           console.warn('meshwiki viewer: image repository:', this.lumigraphStatus);
@@ -216,7 +241,7 @@ class Viewer {
       this.mode = 'model';
       this.root.dataset.mode = 'model';
       this.view.setLumigraph(null);
-      this.streamer.setSettings({ pixelError: DEFAULT_SETTINGS.pixelError });
+      this.streamer.setSettings({ pixelError: this.modelPixelError ?? DEFAULT_SETTINGS.pixelError });
     }
     this.requestFrame();
     return this.mode;
@@ -740,6 +765,17 @@ async function boot() {
       },
       /** The region selection's state (editors; null for viewers). */
       selection: () => (viewer.selection ? viewer.selection.state() : null),
+      /** Mean milliseconds of `n` frames rendered back to back, each finished on the GPU (bench). */
+      timeFrames: (n) => {
+        const gl = viewer.view.renderer.getContext();
+        const px = new Uint8Array(4);
+        const t = performance.now();
+        for (let i = 0; i < n; i++) {
+          viewer.frame();
+          gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+        }
+        return (performance.now() - t) / n;
+      },
       /** Renders a frame now and returns it as a PNG data URL (tests, bench). */
       snapshot: () => {
         viewer.frame();

@@ -69,7 +69,7 @@ uniform float uLgSharpness;
 uniform float uLgDepthSide;
 uniform float uLgPixel;
 // Blends the images that saw point P: each weighed by how close its ray is to the view ray
-// (towards the eye, V), and used only where its depth shows this very surface (within the
+// (towards the eye, V) and by its resolution there (1 / depth²), and used only where its depth shows this very surface (within the
 // sparse mesh's error plus a few texels), so no image lands on a surface it did not see.
 bool lumigraph(vec3 P, vec3 V, out vec3 albedo, out vec3 normal, out float hasAlbedo) {
   vec3 aSum = vec3(0.0);
@@ -80,12 +80,11 @@ bool lumigraph(vec3 P, vec3 V, out vec3 albedo, out vec3 normal, out float hasAl
     vec4 g = uLgPoints[k];
     if (g.w < 0.5) continue;
     vec3 dir = P - g.xyz;
-    int d = 0;
-    float z = -1e30;
-    for (int j = 0; j < 6; j++) {
-      float t = dot(dir, uLgForward[j]);
-      if (t > z) { z = t; d = j; }
-    }
+    // The face that sees dir: its dominant axis (d = 2 axis + negative, checked by the
+    // repository against the description's directions).
+    vec3 ad = abs(dir);
+    int d = ad.x >= ad.y && ad.x >= ad.z ? (dir.x >= 0.0 ? 0 : 1) : ad.y >= ad.z ? (dir.y >= 0.0 ? 2 : 3) : (dir.z >= 0.0 ? 4 : 5);
+    float z = dot(dir, uLgForward[d]);
     int layer = k * 6 + d;
     vec4 info = uLgLayers[layer];
     if (info.x < 0.5 || z <= 0.0) continue;
@@ -101,7 +100,8 @@ bool lumigraph(vec3 P, vec3 V, out vec3 albedo, out vec3 normal, out float hasAl
     if (abs(z - seen) > uLgTolerance + z * 8.0 * uLgPixel) continue;
     float c = dot(normalize(-dir), V);
     if (c <= 0.0) continue;
-    float w = exp(uLgSharpness * (c - 1.0)) + 1e-6;
+    // Closer images hold more texels of the point: at similar angles they count more.
+    float w = (exp(uLgSharpness * (c - 1.0)) + 1e-6) / (z * z);
     vec3 n = texture(uLgNormal, vec3(uv, float(layer))).rgb * 2.0 - 1.0;
     if (dot(n, V) < 0.0) n = -n;
     nSum += w * n;
@@ -431,8 +431,12 @@ export class SceneView {
   /** Renders; `outline` (0 none, 1 hovered, 2 selected) draws the bold boundary. */
   render(outline = 0) {
     this.fitClipPlanes();
-    // The repository's points and layers change as images arrive.
-    if (this.lumigraph) this.material.uniformsNeedUpdate = true;
+    // The repository's points and layers change as images arrive (and its albedo array is
+    // made once the first albedo arrives).
+    if (this.lumigraph) {
+      this.material.uniforms.uLgAlbedo.value = this.lumigraph.albedo;
+      this.material.uniformsNeedUpdate = true;
+    }
     if (this.material.uniforms.uLightMode.value > 0.5) {
       // Raking light, fixed to the view: from the upper left, grazing the surface facing us.
       const m = this.camera.matrixWorld.elements;

@@ -28,7 +28,7 @@ function numberField(label, value, attrs, onChange) {
 }
 
 /** A group of radio buttons `[value, label]`, `value` checked. */
-function choice(legend, name, options, value, onChange) {
+export function choice(legend, name, options, value, onChange) {
   const set = document.createElement('fieldset');
   set.className = 'viewer-choice';
   const l = document.createElement('legend');
@@ -152,6 +152,10 @@ export function makeToolbar(host, settings, look, actions) {
     /** Shows "Clear focus" while there are focus points. */
     setFoveaCount(n) {
       clear.hidden = n === 0;
+    },
+    /** Adds a setting (an element) to the View menu, before the keyboard help. */
+    addSetting(el) {
+      panel.insertBefore(el, keys);
     },
     /** Appends a tool group (an element) after the status line. */
     addGroup(el) {

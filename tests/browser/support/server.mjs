@@ -29,7 +29,16 @@ export class Api {
       h['Content-Type'] = 'application/json';
       payload = JSON.stringify(json);
     }
-    const res = await fetch(this.base + path, { method, headers: h, body: payload, redirect: 'manual' });
+    const send = () => fetch(this.base + path, { method, headers: h, body: payload, redirect: 'manual' });
+    let res;
+    try {
+      res = await send();
+    } catch (e) {
+      // A kept-alive connection the server closed while idle (after a long pause of the
+      // caller) fails once: a read is sent again on a fresh one.
+      if (method !== 'GET') throw e;
+      res = await send();
+    }
     const set = res.headers.getSetCookie ? res.headers.getSetCookie() : (res.headers.get('set-cookie') || '').split(/,(?=\s*\w+=)/);
     for (const c of set) if (c.trim().startsWith('meshwiki_session=')) this.cookie = c.trim().split(';')[0];
     if (raw) return res;
