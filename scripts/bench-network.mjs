@@ -15,9 +15,9 @@
 import { mkdirSync, statSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 
-import { cameraPath, pickMesh } from './bench-path.mjs';
+import { cameraPath, openOnLink, pickMesh } from './bench-path.mjs';
 import { ADMIN, importScan, startServer } from '../tests/browser/support/server.mjs';
-import { launch, login, poll, waitViewer } from '../tests/browser/support/browser.mjs';
+import { launch, poll } from '../tests/browser/support/browser.mjs';
 import { leafVertices, regionAt } from '../tests/browser/support/regions.mjs';
 
 const args = process.argv.slice(2);
@@ -120,17 +120,7 @@ function quality(page, url) {
 async function run(server, model, path, mode) {
   const browser = await launch();
   try {
-    const page = await browser.page();
-    await login(page, server.base, mode === 'image' ? VIEWER : ADMIN);
-    const cdp = await page.context().newCDPSession(page);
-    await cdp.send('Network.enable');
-    await cdp.send('Network.setCacheDisabled', { cacheDisabled: true });
-    await cdp.send('Network.emulateNetworkConditions', { offline: false, latency: LATENCY_MS, downloadThroughput: (MBPS * 1e6) / 8, uploadThroughput: (MBPS * 1e6) / 8 });
-    const first = path[0];
-    const hash = `camera=${[...first.eye, ...first.target, ...first.up, first.fovy].join(',')}`;
-    const t0 = Date.now();
-    await page.goto(`${server.base}/models/${model.id}#${hash}`);
-    await waitViewer(page, () => true, VIEW_TIMEOUT);
+    const { page, t0 } = await openOnLink(browser, server, model, mode === 'image' ? VIEWER : ADMIN, path, { mbps: MBPS, latencyMs: LATENCY_MS, timeout: VIEW_TIMEOUT });
     if (mode === 'image' && IMAGE_PX) {
       await poll(page, () => window.meshwikiViewer.stats().mode, (m) => m === 'image');
       await page.evaluate((px) => window.meshwikiViewer.setSettings({ pixelError: px }), Number(IMAGE_PX));

@@ -5,6 +5,7 @@ import { existsSync } from 'node:fs';
 import { join } from 'node:path';
 
 import { SHARED_MESHES, sampleMesh } from '../tests/browser/support/env.mjs';
+import { login, waitViewer } from '../tests/browser/support/browser.mjs';
 
 /** The scan of a bench: `given`, else the first real scan of ../shared, else a sample. */
 export function pickMesh(given) {
@@ -33,4 +34,24 @@ export function cameraPath(center, radius, p) {
     { name: 'close-up', ...toward(0.2 * radius) },
     { name: 'pan', eye: add(toward(0.2 * radius).eye, [0.08 * radius, 0, 0]), target: add(p, [0.08 * radius, 0, 0]), up: [0, 1, 0], fovy: 40 },
   ].map(round);
+}
+
+/**
+ * Opens model `model` as `user` in a new page of `browser` on an emulated link (`mbps`,
+ * `latencyMs`, cache off), at the path's first camera; resolves once the viewer runs, with the
+ * page and the time navigation started.
+ */
+export async function openOnLink(browser, server, model, user, path, { mbps, latencyMs, timeout }) {
+  const page = await browser.page();
+  await login(page, server.base, user);
+  const cdp = await page.context().newCDPSession(page);
+  await cdp.send('Network.enable');
+  await cdp.send('Network.setCacheDisabled', { cacheDisabled: true });
+  await cdp.send('Network.emulateNetworkConditions', { offline: false, latency: latencyMs, downloadThroughput: (mbps * 1e6) / 8, uploadThroughput: (mbps * 1e6) / 8 });
+  const first = path[0];
+  const hash = `camera=${[...first.eye, ...first.target, ...first.up, first.fovy].join(',')}`;
+  const t0 = Date.now();
+  await page.goto(`${server.base}/models/${model.id}#${hash}`);
+  await waitViewer(page, () => true, timeout);
+  return { page, t0 };
 }

@@ -8,9 +8,9 @@
 import { statSync } from 'node:fs';
 import { join } from 'node:path';
 
-import { cameraPath, pickMesh } from './bench-path.mjs';
+import { cameraPath, openOnLink, pickMesh } from './bench-path.mjs';
 import { ADMIN, importScan, startServer } from '../tests/browser/support/server.mjs';
-import { launch, login, poll, waitViewer } from '../tests/browser/support/browser.mjs';
+import { launch, poll } from '../tests/browser/support/browser.mjs';
 import { leafVertices, regionAt } from '../tests/browser/support/regions.mjs';
 
 const args = process.argv.slice(2);
@@ -26,17 +26,7 @@ const VIEW_TIMEOUT = Number(opt('view-timeout', '180')) * 1000;
 async function run(server, model, path, probe, fovea) {
   const browser = await launch();
   try {
-    const page = await browser.page();
-    await login(page, server.base, ADMIN);
-    const cdp = await page.context().newCDPSession(page);
-    await cdp.send('Network.enable');
-    await cdp.send('Network.setCacheDisabled', { cacheDisabled: true });
-    await cdp.send('Network.emulateNetworkConditions', { offline: false, latency: LATENCY_MS, downloadThroughput: (MBPS * 1e6) / 8, uploadThroughput: (MBPS * 1e6) / 8 });
-    const first = path[0];
-    const hash = `camera=${[...first.eye, ...first.target, ...first.up, first.fovy].join(',')}`;
-    const t0 = Date.now();
-    await page.goto(`${server.base}/models/${model.id}#${hash}`);
-    await waitViewer(page, () => true, VIEW_TIMEOUT);
+    const { page, t0 } = await openOnLink(browser, server, model, ADMIN, path, { mbps: MBPS, latencyMs: LATENCY_MS, timeout: VIEW_TIMEOUT });
     await page.evaluate(({ probe, fovea }) => {
       window.meshwikiViewer.setProbes([probe]);
       if (fovea) window.meshwikiViewer.setFoveae([probe]);

@@ -253,23 +253,30 @@ pub async fn create_for_model(
 ) -> Result<(Model, Job)> {
     let mut tx = db.begin().await?;
     check_takes_scan(&models::get_tx(&mut tx, model_id).await?)?;
-    let active: i64 = sqlx::query_scalar(
-        "SELECT COUNT(*) FROM jobs WHERE model_id = ? AND status IN ('queued', 'running')",
-    )
-    .bind(model_id)
-    .fetch_one(&mut *tx)
-    .await?;
-    if active > 0 {
-        return Err(StoreError::Conflict(format!(
-            "model {model_id} already has a build queued or running"
-        )));
-    }
+    check_idle_tx(&mut tx, model_id).await?;
     set_model_status_tx(&mut tx, model_id, ModelStatus::Pending, None).await?;
     let id = insert_tx(&mut tx, model_id, job, user_id).await?;
     let model = models::get_tx(&mut tx, model_id).await?;
     let job = get_tx(&mut tx, id).await?;
     tx.commit().await?;
     Ok((model, job))
+}
+
+/// [`StoreError::Conflict`] while model `model_id` has a job (a build or an image repository)
+/// queued or running.
+pub(super) async fn check_idle_tx(tx: &mut Tx, model_id: i64) -> Result<()> {
+    let active: i64 = sqlx::query_scalar(
+        "SELECT COUNT(*) FROM jobs WHERE model_id = ? AND status IN ('queued', 'running')",
+    )
+    .bind(model_id)
+    .fetch_one(&mut **tx)
+    .await?;
+    if active > 0 {
+        return Err(StoreError::Conflict(format!(
+            "model {model_id} already has a job queued or running"
+        )));
+    }
+    Ok(())
 }
 
 /// [`StoreError::Conflict`] unless `model` can take a new scan: it has none built (status

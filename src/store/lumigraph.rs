@@ -151,17 +151,7 @@ pub async fn start(
             model.status.as_str()
         )));
     }
-    let active: i64 = sqlx::query_scalar(
-        "SELECT COUNT(*) FROM jobs WHERE model_id = ? AND status IN ('queued', 'running')",
-    )
-    .bind(model_id)
-    .fetch_one(&mut *tx)
-    .await?;
-    if active > 0 {
-        return Err(StoreError::Conflict(format!(
-            "model {model_id} already has a job queued or running"
-        )));
-    }
+    jobs::check_idle_tx(&mut tx, model_id).await?;
     let old: Vec<String> = sqlx::query_scalar(
         "SELECT DISTINCT sha256 FROM lumigraph_images WHERE model_id = ? AND sha256 IS NOT NULL",
     )
