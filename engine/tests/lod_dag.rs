@@ -270,6 +270,45 @@ fn check_cuts(file: &LodFile, input: &Mesh) {
     }
 }
 
+/// The sparse mesh (network mode): the uniform cut at the smallest error within a triangle
+/// budget, every node of it "within sparse", and no smaller error within the budget.
+fn check_sparse(file: &LodFile) {
+    use meshwiki_engine::lod::sparse::{sparse_error, within_sparse};
+    let nodes = file.nodes();
+    let tris = |e: f32| -> u64 {
+        lod::cut_uniform(nodes, e)
+            .iter()
+            .map(|&i| nodes[i as usize].triangle_count as u64)
+            .sum()
+    };
+    let leaves = tris(0.0);
+    let roots = tris(f32::MAX);
+    for budget in [leaves, leaves / 4, leaves / 16, roots, 1] {
+        let e = sparse_error(nodes, budget);
+        let cut = lod::cut_uniform(nodes, e);
+        assert!(!cut.is_empty());
+        assert!(cut.iter().all(|&i| within_sparse(&nodes[i as usize], e)));
+        if budget >= roots {
+            assert!(tris(e) <= budget, "budget {budget}: {} triangles", tris(e));
+            // No smaller error of a node keeps within the budget.
+            assert!(
+                nodes
+                    .iter()
+                    .map(|n| n.lod_error)
+                    .filter(|&x| x < e)
+                    .all(|x| tris(x) > budget),
+                "budget {budget}: a finer cut fits"
+            );
+        }
+        // Nodes finer than the sparse mesh are exactly those not within it.
+        for n in nodes {
+            if !within_sparse(n, e) {
+                assert!(n.lod_error <= e);
+            }
+        }
+    }
+}
+
 fn build_and_check(name: &str, mesh: &Mesh, max_tris: usize) {
     let out = temp(name);
     let options = BuildOptions {
@@ -283,6 +322,7 @@ fn build_and_check(name: &str, mesh: &Mesh, max_tris: usize) {
     let tris: Vec<[u32; 3]> = mesh.indices.chunks(3).map(|t| [t[0], t[1], t[2]]).collect();
     check_structure(&file, max_tris as u32, boundary(&tris).len());
     check_cuts(&file, mesh);
+    check_sparse(&file);
     // Nothing but the output and its surface segments is left behind.
     let dir = out.parent().expect("dir");
     let mut leftovers: Vec<_> = std::fs::read_dir(dir)
