@@ -32,7 +32,12 @@ pub const DEFAULT_SIZE: u32 = 512;
 /// JPEG quality of the albedo and normal images.
 pub const QUALITY: u8 = 80;
 
-/// Checks a requested grid: points per axis and image side within the engine's bounds.
+/// Pixels a repository may hold in all (images × side²): the paper's largest grid, 32³ points
+/// of 512² images, fits; 64³ points of 512² images do not.
+pub const MAX_PIXELS: u64 = 1 << 36;
+
+/// Checks a requested grid: points per axis and image side within the engine's bounds, and
+/// the whole repository within [`MAX_PIXELS`].
 pub fn check_request(grid: u32, size: u32) -> Result<(), JobError> {
     if !(grid::MIN_POINTS..=grid::MAX_POINTS).contains(&grid) {
         return Err(JobError::Invalid(format!(
@@ -46,6 +51,14 @@ pub fn check_request(grid: u32, size: u32) -> Result<(), JobError> {
             "image size must be {} to {} pixels, got {size}",
             grid::MIN_SIZE,
             grid::MAX_SIZE
+        )));
+    }
+    let images = (grid as u64).pow(3) * 6;
+    if images * (size as u64).pow(2) > MAX_PIXELS {
+        return Err(JobError::Invalid(format!(
+            "a repository of {images} images of {size}x{size} pixels is larger than this server \
+             builds ({} gigapixels at most): use fewer grid points or smaller images",
+            MAX_PIXELS >> 30
         )));
     }
     Ok(())

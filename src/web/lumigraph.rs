@@ -74,7 +74,8 @@ pub struct LumigraphStarted {
 /// Build (or rebuild) the model's image repository
 ///
 /// Queues a background job that renders every grid point's six images from the model's
-/// hierarchy, replacing the repository the model has. The job shows live progress, can be
+/// hierarchy, replacing the repository the model has. A repository of more than 2^36 pixels
+/// in all (grid³ × 6 × size²) is refused (400). The job shows live progress, can be
 /// cancelled, and resumes after a crash. The model must be ready, with no job queued or
 /// running (409).
 #[utoipa::path(post, path = "/api/v1/models/{id}/lumigraph", tag = "lumigraph",

@@ -73,6 +73,10 @@ fn an_image_repository_is_built_served_rebuilt_and_deleted() {
     admin
         .post("/api/v1/models/999999/lumigraph", &json!({}))
         .assert_error(404);
+    let msg = admin
+        .post(&base, &json!({"grid": 64, "size": 512}))
+        .assert_error(400);
+    assert!(msg.contains("fewer grid points"), "{msg}");
 
     // Build a small repository and wait for it.
     let job = start(&admin, model, json!({"grid": 3, "size": 64}));
