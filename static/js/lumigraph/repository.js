@@ -2,8 +2,9 @@
 // the images of the grid points nearest to the eye, fetched as the view needs them and kept
 // on the GPU in texture arrays that the scene's shader projects onto the sparse mesh.
 //
-// - Points: the `SLOTS` lattice points nearest to the eye (clamped into the viewing box), so
-//   the images' rays are the closest to the view's rays the repository has.
+// - Points: the `SLOTS` lattice points nearest to the eye (clamped into the viewing box) on the
+//   eye's side of the view's target, so the images' rays are the closest to the view's rays
+//   the repository has.
 // - Faces: of each point, only the directions that see a drawn patch (the bounding cube of each
 //   drawn patch's sphere, seen from the point, names the faces it falls in).
 // - Requests: nearest point first, at most `maxInFlight` at once, `?v=<job>` in the URL so the
@@ -90,19 +91,25 @@ export class Repository {
     return [0, 1, 2].map((a) => this.min[a] + p[a] * this.spacing);
   }
 
-  /** The `SLOTS` lattice points nearest to `eye`. */
-  nearest(eye) {
+  /**
+   * The `SLOTS` lattice points nearest to `eye` among those on the eye's side of the view's
+   * target (a point beyond it sees the surface from behind: its rays point against the view's).
+   */
+  nearest(eye, target) {
     const n = this.n;
     const c = [0, 1, 2].map((a) => Math.min(n - 1, Math.max(0, (eye[a] - this.min[a]) / this.spacing)));
     const r = [0, 1, 2].map((a) => Math.round(c[a]));
     const cands = [];
-    for (let dz = -2; dz <= 2; dz++) {
-      for (let dy = -2; dy <= 2; dy++) {
-        for (let dx = -2; dx <= 2; dx++) {
+    const view = [0, 1, 2].map((a) => target[a] - eye[a]);
+    for (let dz = -3; dz <= 3; dz++) {
+      for (let dy = -3; dy <= 3; dy++) {
+        for (let dx = -3; dx <= 3; dx++) {
           const p = [r[0] + dx, r[1] + dy, r[2] + dz];
           if (p.some((v) => v < 0 || v >= n)) continue;
           const w = this.position(p);
-          cands.push({ p, dist: Math.hypot(w[0] - eye[0], w[1] - eye[1], w[2] - eye[2]) });
+          const dist = Math.hypot(w[0] - eye[0], w[1] - eye[1], w[2] - eye[2]);
+          const ahead = (target[0] - w[0]) * view[0] + (target[1] - w[1]) * view[1] + (target[2] - w[2]) * view[2];
+          cands.push({ p, dist: ahead > 0 ? dist : dist + 1e6 });
         }
       }
     }
@@ -127,7 +134,7 @@ export class Repository {
     const moved = !this.lastEye || Math.hypot(eye[0] - this.lastEye[0], eye[1] - this.lastEye[1], eye[2] - this.lastEye[2]) > RESELECT * this.spacing;
     if (moved) {
       this.lastEye = eye.slice();
-      this.assign(this.nearest(eye));
+      this.assign(this.nearest(eye, camera.target));
     }
     const wanted = [];
     const b = table.bounds;
