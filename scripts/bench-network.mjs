@@ -15,16 +15,12 @@
 import { mkdirSync, statSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 
-import { cameraPath, openOnLink, pickMesh } from './bench-path.mjs';
+import { cameraPath, openOnLink, option, pickMesh } from './bench-path.mjs';
 import { ADMIN, importScan, startServer } from '../tests/browser/support/server.mjs';
 import { launch, poll } from '../tests/browser/support/browser.mjs';
 import { leafVertices, regionAt } from '../tests/browser/support/regions.mjs';
 
-const args = process.argv.slice(2);
-const opt = (name, dflt) => {
-  const i = args.indexOf(`--${name}`);
-  return i >= 0 ? args[i + 1] : dflt;
-};
+const opt = option(process.argv.slice(2));
 const MBPS = Number(opt('mbps', '16'));
 const LATENCY_MS = Number(opt('latency', '20'));
 const GRID = Number(opt('grid', '6'));

@@ -7,6 +7,14 @@ import { join } from 'node:path';
 import { SHARED_MESHES, sampleMesh } from '../tests/browser/support/env.mjs';
 import { login, waitViewer } from '../tests/browser/support/browser.mjs';
 
+/** `--name value` options of `args`: `opt(name, default)`. */
+export function option(args) {
+  return (name, dflt) => {
+    const i = args.indexOf(`--${name}`);
+    return i >= 0 ? args[i + 1] : dflt;
+  };
+}
+
 /** The scan of a bench: `given`, else the first real scan of ../shared, else a sample. */
 export function pickMesh(given) {
   if (given) return { path: given, name: given.split('/').pop(), real: true };

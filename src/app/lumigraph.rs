@@ -5,13 +5,13 @@
 use std::path::PathBuf;
 
 use glam::Vec3;
-use meshwiki_engine::lumigraph::{DIRECTIONS, Grid, image};
+use meshwiki_engine::lumigraph::{DIRECTIONS, Grid, grid, image};
 use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::AppError;
 use super::models::Purpose;
-use crate::jobs::lumigraph::{DEFAULT_GRID, DEFAULT_SIZE, check_request};
+use crate::jobs::lumigraph::{DEFAULT_GRID, DEFAULT_SIZE};
 use crate::store::jobs::Job;
 use crate::store::lumigraph::{self, Counts, Entry, LumigraphStatus};
 use crate::store::models::{self, GeometryAccess, ModelStatus};
@@ -176,7 +176,7 @@ impl super::App {
             ));
         }
         let (grid, size) = (grid.unwrap_or(DEFAULT_GRID), size.unwrap_or(DEFAULT_SIZE));
-        check_request(grid, size)?;
+        // (`submit_lumigraph` checks the request.)
         let (_, job) = self
             .jobs
             .submit_lumigraph(model_id, grid, size, user.id)
@@ -184,24 +184,28 @@ impl super::App {
         Ok((self.lumigraph(model_id).await?, job))
     }
 
-    /// Image `(x, y, z, d)` of model `model_id`'s repository: 404 for a key outside the grid
-    /// or not rendered yet.
+    /// Image `(x, y, z, d)` of model `model_id`'s repository: 404 for a key outside the grid,
+    /// an image not rendered yet, or (with `version`) a repository built by another job.
     pub async fn lumigraph_image(
         &self,
         model_id: i64,
         key: [u32; 4],
+        version: Option<i64>,
     ) -> Result<LumigraphImage, AppError> {
         let repo = lumigraph::get(&self.db, model_id).await?.ok_or_else(|| {
             AppError::NotFound(format!("model {model_id} has no image repository"))
         })?;
-        let [x, y, z, d] = key;
-        let n = repo.grid;
-        if x >= n || y >= n || z >= n || d >= 6 {
+        if let Some(v) = version
+            && repo.job_id != Some(v)
+        {
             return Err(AppError::NotFound(format!(
-                "image ({x}, {y}, {z}, {d}) is outside the repository's {n}x{n}x{n} grid of 6 \
-                 directions"
+                "version {v} of model {model_id}'s image repository is gone (the current one is \
+                 {})",
+                repo.job_id.map_or("none".to_string(), |c| c.to_string())
             )));
         }
+        grid::check_key(repo.grid, key).map_err(|e| AppError::NotFound(e.to_string()))?;
+        let [x, y, z, d] = key;
         match lumigraph::entry(&self.db, model_id, key).await? {
             None => Err(AppError::NotFound(format!(
                 "image ({x}, {y}, {z}, {d}) is not rendered yet (the repository is {})",

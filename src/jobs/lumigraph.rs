@@ -11,6 +11,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
+use meshwiki_engine::lod::LodFile;
 use meshwiki_engine::lumigraph::sample::{self, PointImages};
 use meshwiki_engine::lumigraph::{Grid, grid};
 use meshwiki_engine::progress::Progress;
@@ -39,20 +40,7 @@ pub const MAX_PIXELS: u64 = 1 << 36;
 /// Checks a requested grid: points per axis and image side within the engine's bounds, and
 /// the whole repository within [`MAX_PIXELS`].
 pub fn check_request(grid: u32, size: u32) -> Result<(), JobError> {
-    if !(grid::MIN_POINTS..=grid::MAX_POINTS).contains(&grid) {
-        return Err(JobError::Invalid(format!(
-            "grid must be {} to {} points per axis, got {grid}",
-            grid::MIN_POINTS,
-            grid::MAX_POINTS
-        )));
-    }
-    if !(grid::MIN_SIZE..=grid::MAX_SIZE).contains(&size) {
-        return Err(JobError::Invalid(format!(
-            "image size must be {} to {} pixels, got {size}",
-            grid::MIN_SIZE,
-            grid::MAX_SIZE
-        )));
-    }
+    grid::check_shape(grid, size).map_err(|e| JobError::Invalid(e.to_string()))?;
     let images = (grid as u64).pow(3) * 6;
     if images * (size as u64).pow(2) > MAX_PIXELS {
         return Err(JobError::Invalid(format!(
@@ -142,9 +130,12 @@ impl Jobs {
         if let Err(e) = service.renderer() {
             return fail(e.to_string()).await;
         }
-        let opened = tokio::task::spawn_blocking(move || RenderModel::open(&path))
-            .await
-            .map_err(|e| JobError::Invalid(e.to_string()))?;
+        // The hierarchy alone: images need no surface segments (those serve selection).
+        let opened = tokio::task::spawn_blocking(move || {
+            LodFile::open(&path).map(|lod| RenderModel::new(Arc::new(lod)))
+        })
+        .await
+        .map_err(|e| JobError::Invalid(e.to_string()))?;
         let render_model = match opened {
             Ok(m) => Arc::new(m),
             Err(e) => return fail(format!("cannot open the model's LOD file: {e}")).await,

@@ -152,12 +152,7 @@ pub async fn start(
         )));
     }
     jobs::check_idle_tx(&mut tx, model_id).await?;
-    let old: Vec<String> = sqlx::query_scalar(
-        "SELECT DISTINCT sha256 FROM lumigraph_images WHERE model_id = ? AND sha256 IS NOT NULL",
-    )
-    .bind(model_id)
-    .fetch_all(&mut *tx)
-    .await?;
+    let old = blobs_of(&mut *tx, model_id).await?;
     sqlx::query("DELETE FROM lumigraph_images WHERE model_id = ?")
         .bind(model_id)
         .execute(&mut *tx)
@@ -373,10 +368,14 @@ pub async fn used_blobs(db: &Db) -> Result<std::collections::HashSet<String>> {
 
 /// The SHA-256 of `model_id`'s repository images.
 pub async fn model_blobs(db: &Db, model_id: i64) -> Result<Vec<String>> {
+    blobs_of(&db.read, model_id).await
+}
+
+async fn blobs_of<'e>(e: impl sqlx::SqliteExecutor<'e>, model_id: i64) -> Result<Vec<String>> {
     Ok(sqlx::query_scalar(
         "SELECT DISTINCT sha256 FROM lumigraph_images WHERE model_id = ? AND sha256 IS NOT NULL",
     )
     .bind(model_id)
-    .fetch_all(&db.read)
+    .fetch_all(e)
     .await?)
 }

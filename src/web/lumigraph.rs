@@ -152,18 +152,7 @@ async fn image(
 ) -> Result<HttpResponse, ApiError> {
     let (id, x, y, z, d) = path.into_inner();
     reader.model(&state.db, id).await?;
-    if let Some(v) = q.v {
-        let current = crate::store::lumigraph::get(&state.db, id)
-            .await?
-            .and_then(|r| r.job_id);
-        if current != Some(v) {
-            return Err(ApiError::NotFound(format!(
-                "version {v} of model {id}'s image repository is gone (the current one is {})",
-                current.map_or("none".to_string(), |c| c.to_string())
-            )));
-        }
-    }
-    match state.lumigraph_image(id, [x, y, z, d]).await? {
+    match state.lumigraph_image(id, [x, y, z, d], q.v).await? {
         LumigraphImage::Empty => Ok(HttpResponse::NoContent()
             .insert_header((header::CACHE_CONTROL, IMMUTABLE))
             .finish()),

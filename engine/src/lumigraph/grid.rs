@@ -67,8 +67,27 @@ pub enum GridError {
     Size(u32),
     #[error("the model's bounding box is empty or not finite")]
     Bounds,
-    #[error("grid point ({0}, {1}, {2}) direction {3} is outside the grid")]
-    Key(u32, u32, u32, u32),
+    #[error("image ({0}, {1}, {2}, {3}) is outside a {4}x{4}x{4} grid of 6 directions")]
+    Key(u32, u32, u32, u32, u32),
+}
+
+/// Checks a grid's shape: `points` per axis and the image side within bounds.
+pub fn check_shape(points: u32, size: u32) -> Result<(), GridError> {
+    if !(MIN_POINTS..=MAX_POINTS).contains(&points) {
+        return Err(GridError::Points(points));
+    }
+    if !(MIN_SIZE..=MAX_SIZE).contains(&size) {
+        return Err(GridError::Size(size));
+    }
+    Ok(())
+}
+
+/// Checks a key `(x, y, z, d)` of a grid of `points` per axis.
+pub fn check_key(points: u32, [x, y, z, d]: [u32; 4]) -> Result<(), GridError> {
+    if x >= points || y >= points || z >= points || d >= 6 {
+        return Err(GridError::Key(x, y, z, d, points));
+    }
+    Ok(())
 }
 
 /// The viewing box split into `points`³ grid points, each with six `size`² images.
@@ -87,12 +106,7 @@ pub struct Grid {
 impl Grid {
     /// The grid around a model with bounding box `[lo, hi]`.
     pub fn new(lo: Vec3, hi: Vec3, points: u32, size: u32) -> Result<Grid, GridError> {
-        if !(MIN_POINTS..=MAX_POINTS).contains(&points) {
-            return Err(GridError::Points(points));
-        }
-        if !(MIN_SIZE..=MAX_SIZE).contains(&size) {
-            return Err(GridError::Size(size));
-        }
+        check_shape(points, size)?;
         let extent = (hi - lo).max_element();
         if !lo.is_finite() || !hi.is_finite() || extent.is_nan() || extent <= 0.0 {
             return Err(GridError::Bounds);
@@ -126,15 +140,6 @@ impl Grid {
     pub fn keys(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
         let n = self.points;
         (0..n).flat_map(move |z| (0..n).flat_map(move |y| (0..n).map(move |x| [x, y, z])))
-    }
-
-    /// Checks a key `(x, y, z, d)`.
-    pub fn check(&self, x: u32, y: u32, z: u32, d: u32) -> Result<(), GridError> {
-        let n = self.points;
-        if x >= n || y >= n || z >= n || d >= 6 {
-            return Err(GridError::Key(x, y, z, d));
-        }
-        Ok(())
     }
 
     /// The camera of image `(x, y, z, d)`: at the grid point, looking along direction `d`,
@@ -215,9 +220,8 @@ mod tests {
             Grid::new(Vec3::ONE, Vec3::ONE, 8, 64),
             Err(GridError::Bounds)
         );
-        let g = Grid::new(Vec3::ZERO, Vec3::ONE, 4, 64).unwrap();
-        assert!(g.check(3, 3, 3, 5).is_ok());
-        assert!(g.check(4, 0, 0, 0).is_err() && g.check(0, 0, 0, 6).is_err());
+        assert!(check_key(4, [3, 3, 3, 5]).is_ok());
+        assert!(check_key(4, [4, 0, 0, 0]).is_err() && check_key(4, [0, 0, 0, 6]).is_err());
         assert!(enclosed([1.0; 6]) && !enclosed([1.0, 1.0, 1.0, 1.0, 1.0, 0.99]));
     }
 }

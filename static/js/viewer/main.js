@@ -192,6 +192,27 @@ class Viewer {
   }
 
   /**
+   * The model's image repository (GET /api/v1/models/{id}/lumigraph), asked for once:
+   * `{ok, description}`, or `{ok: false, problem}`.
+   */
+  lumigraphDescription() {
+    if (!this.describing) {
+      this.describing = (async () => {
+        try {
+          const res = await fetch(`/api/v1/models/${this.modelId}/lumigraph`, { credentials: 'same-origin' });
+          if (!res.ok) return { ok: false, problem: `HTTP ${res.status}` };
+          return { ok: true, description: await res.json() };
+        } catch (e) {
+          const problem = String(e.message || e);
+          console.warn('meshwiki viewer: image repository:', problem);
+          return { ok: false, problem };
+        }
+      })();
+    }
+    return this.describing;
+  }
+
+  /**
    * The View menu's choice of geometry: full resolution, or image-based once the model has an
    * image repository; a model that keeps its geometry on the server says so instead.
    */
@@ -203,12 +224,8 @@ class Viewer {
       this.toolbar.addSetting(note);
       return;
     }
-    try {
-      const res = await fetch(`/api/v1/models/${this.modelId}/lumigraph`, { credentials: 'same-origin' });
-      if (!res.ok || (await res.json()).status !== 'ready') return;
-    } catch {
-      return;
-    }
+    const { ok, description } = await this.lumigraphDescription();
+    if (!ok || description.status !== 'ready') return;
     this.toolbar.addSetting(
       choice('Geometry', 'viewer-geometry', [['model', 'Full resolution'], ['image', 'Image-based (little data, as over a slow network)']], this.mode, (v) => this.setMode(v)),
     );
@@ -226,15 +243,9 @@ class Viewer {
       this.root.dataset.mode = 'image';
       this.streamer.setSettings({ pixelError: IMAGE_PIXEL_ERROR });
       if (!this.repo) {
-        try {
-          const res = await fetch(`/api/v1/models/${this.modelId}/lumigraph`, { credentials: 'same-origin' });
-          const d = await res.json();
-          this.lumigraphStatus = res.ok ? d.status : `HTTP ${res.status}`;
-          if (res.ok && d.status === 'ready' && !this.repo) this.repo = new Repository(this.modelId, d, { onChange: () => this.requestFrame(), settings: this.streamer.settings });
-        } catch (e) {
-          this.lumigraphStatus = String(e.message || e);
-          console.warn('meshwiki viewer: image repository:', this.lumigraphStatus);
-        }
+        const { ok, description: d, problem } = await this.lumigraphDescription();
+        this.lumigraphStatus = ok ? d.status : problem;
+        if (ok && d.status === 'ready' && !this.repo) this.repo = new Repository(this.modelId, d, { onChange: () => this.requestFrame(), settings: this.streamer.settings });
       }
       if (this.mode === 'image' && this.repo && this.view.lumigraph !== this.repo) this.view.setLumigraph(this.repo);
     } else if (this.geometryFull) {
