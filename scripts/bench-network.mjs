@@ -209,6 +209,10 @@ async function main() {
     const desc = await server.api.get(`/api/v1/models/${model.id}/lumigraph`);
     const imageRun = MODES.includes('image') ? await run(server, model, path, 'image') : null;
     console.log(`  sparse mesh: patches of parent error > ${desc.sparse.error.toPrecision(3)} (model radius ${table.radius.toPrecision(4)})`);
+    if (imageRun) {
+      const c = (await server.api.get(`/api/v1/models/${model.id}/lumigraph`)).counts;
+      console.log(`  refinement levels: ${c.refined_images} images rendered on first request along the path, ${mb(c.refined_bytes)} MB stored`);
+    }
 
     const print = (label, res) => {
       console.log(`\n  ${label} (hierarchy tables ${mb(res.tableBytes)} MB)`);

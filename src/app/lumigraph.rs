@@ -5,13 +5,14 @@
 use std::path::PathBuf;
 
 use glam::Vec3;
-use meshwiki_engine::lumigraph::{DIRECTIONS, Grid, grid, image};
+use meshwiki_engine::lumigraph::{DIRECTIONS, Grid, grid, image, sample};
 use serde::Serialize;
 use utoipa::ToSchema;
 
 use super::AppError;
 use super::models::Purpose;
-use crate::jobs::lumigraph::{DEFAULT_GRID, DEFAULT_SIZE};
+use crate::blobs::{self, Bucket};
+use crate::jobs::lumigraph::{DEFAULT_GRID, DEFAULT_SIZE, QUALITY};
 use crate::store::jobs::Job;
 use crate::store::lumigraph::{self, Counts, Entry, LumigraphStatus};
 use crate::store::models::{self, GeometryAccess, ModelStatus};
@@ -62,8 +63,17 @@ pub struct LumigraphDescription {
     /// The viewing box the grid spans corner to corner (none until the model is ready).
     #[serde(rename = "box")]
     pub viewing_box: Option<ViewingBox>,
-    /// Distance between neighbouring grid points.
+    /// Distance between neighbouring grid points (of level 0).
     pub spacing: Option<f32>,
+    /// Finest refinement level: level `l` has `(grid - 1) * 2^l + 1` points per axis, a
+    /// spacing of `spacing / 2^l`, and keeps only its points within `refine_margin` of its
+    /// spacing of the model's bounding box (`model_box`); its images are rendered on first
+    /// request. Level 0 is the grid itself.
+    pub levels: u32,
+    /// See `levels`.
+    pub refine_margin: f32,
+    /// The model's bounding box, minimum and maximum corner (none until the model is ready).
+    pub model_box: Option<[[f32; 3]; 2]>,
     /// Field of view of every image, degrees (square images).
     pub fov_deg: f32,
     /// The six directions, `d` = 0..5.
@@ -120,7 +130,7 @@ impl super::App {
         let (points, size) = repo
             .as_ref()
             .map_or((DEFAULT_GRID, DEFAULT_SIZE), |r| (r.grid, r.size));
-        let (mut viewing_box, mut spacing, mut sparse) = (None, None, None);
+        let (mut viewing_box, mut spacing, mut sparse, mut model_box) = (None, None, None, None);
         if model.status == ModelStatus::Ready {
             let open = self.models.open(&self.db, model_id, Purpose::Serve).await?;
             let h = open.lod.header();
@@ -130,6 +140,7 @@ impl super::App {
                     side: g.side,
                 });
                 spacing = Some(g.spacing());
+                model_box = Some([g.model[0].to_array(), g.model[1].to_array()]);
             }
             sparse = Some(SparseMesh {
                 error: open.sparse_error,
@@ -143,6 +154,9 @@ impl super::App {
             depth_size: repo.as_ref().map(|r| image::depth_side(r.size)),
             viewing_box: repo.as_ref().and(viewing_box),
             spacing: repo.as_ref().and(spacing),
+            levels: grid::MAX_LEVEL,
+            refine_margin: grid::REFINE_MARGIN,
+            model_box: repo.as_ref().and(model_box),
             fov_deg: 90.0,
             directions: DIRECTIONS
                 .iter()
@@ -184,11 +198,16 @@ impl super::App {
         Ok((self.lumigraph(model_id).await?, job))
     }
 
-    /// Image `(x, y, z, d)` of model `model_id`'s repository: 404 for a key outside the grid,
-    /// an image not rendered yet, or (with `version`) a repository built by another job.
+    /// Image `(x, y, z, d)` of refinement level `level` of model `model_id`'s repository
+    /// (level 0: the grid the build renders). 404 for a key outside the grid or a finer
+    /// level's point away from the model, an image of level 0 not rendered yet, or (with
+    /// `version`) a repository built by another job. An image of a finer level is rendered
+    /// the first time it is asked for, once the repository is ready, and stored like the
+    /// others (`engine/src/lumigraph/grid.rs`, "Refinement levels").
     pub async fn lumigraph_image(
         &self,
         model_id: i64,
+        level: u32,
         key: [u32; 4],
         version: Option<i64>,
     ) -> Result<LumigraphImage, AppError> {
@@ -204,21 +223,90 @@ impl super::App {
                 repo.job_id.map_or("none".to_string(), |c| c.to_string())
             )));
         }
-        grid::check_key(repo.grid, key).map_err(|e| AppError::NotFound(e.to_string()))?;
+        grid::check_key(repo.grid, level, key).map_err(|e| AppError::NotFound(e.to_string()))?;
         let [x, y, z, d] = key;
-        match lumigraph::entry(&self.db, model_id, key).await? {
-            None => Err(AppError::NotFound(format!(
-                "image ({x}, {y}, {z}, {d}) is not rendered yet (the repository is {})",
-                repo.status.as_str()
-            ))),
-            Some(Entry::Empty | Entry::Inside) => Ok(LumigraphImage::Empty),
-            Some(Entry::Image { sha256, .. }) => {
+        let (level, [x, y, z]) = Grid::canonical(level, [x, y, z]);
+        let key = [x, y, z, d];
+        let entry = match lumigraph::entry(&self.db, model_id, level, key).await? {
+            Some(e) => e,
+            None if level == 0 || repo.status != LumigraphStatus::Ready => {
+                return Err(AppError::NotFound(format!(
+                    "image ({x}, {y}, {z}, {d}) of level {level} is not rendered yet (the \
+                     repository is {})",
+                    repo.status.as_str()
+                )));
+            }
+            None => self.render_refined(model_id, &repo, level, key).await?,
+        };
+        match entry {
+            Entry::Empty | Entry::Inside => Ok(LumigraphImage::Empty),
+            Entry::Image { sha256, .. } => {
                 let path = self.settings.lumigraph_path(&sha256).ok_or_else(|| {
                     AppError::internal(format!("malformed image address {sha256}"))
                 })?;
                 Ok(LumigraphImage::Image { path, sha256 })
             }
         }
+    }
+
+    /// Renders, stores and records image `key` of refinement level `level` (> 0) of ready
+    /// repository `repo`; 404 when the point is not kept by its level, or when the
+    /// repository was rebuilt meanwhile.
+    async fn render_refined(
+        &self,
+        model_id: i64,
+        repo: &lumigraph::Lumigraph,
+        level: u32,
+        key: [u32; 4],
+    ) -> Result<Entry, AppError> {
+        let job_id = repo.job_id.ok_or_else(|| {
+            AppError::NotFound(format!("model {model_id}'s image repository has no build"))
+        })?;
+        let open = self.models.open(&self.db, model_id, Purpose::Serve).await?;
+        let lod = open.lod.clone();
+        let h = lod.header();
+        let g = Grid::new(
+            Vec3::from(h.bbox_min),
+            Vec3::from(h.bbox_max),
+            repo.grid,
+            repo.size,
+        )
+        .map_err(|e| AppError::NotFound(e.to_string()))?;
+        g.check_level_key(level, key)
+            .map_err(|e| AppError::NotFound(e.to_string()))?;
+        let with_albedo = lod.has_colors() || lod.has_texture();
+        let service = self.render.clone();
+        let ticket = service.admit(sample::frame_bytes(&g)).await?;
+        let (model, settings) = (open.render.clone(), self.settings.clone());
+        let (rendered, _hold) = service
+            .run(ticket, move |r| -> Result<Entry, String> {
+                let image = sample::sample_image(r, &model, &g, level, key, with_albedo, QUALITY)
+                    .map_err(|e| e.to_string())?;
+                let Some(bytes) = image else {
+                    return Ok(Entry::Empty);
+                };
+                let sha256 = blobs::write_bytes_to(&settings, Bucket::Lumigraph, &bytes)
+                    .map_err(|e| format!("cannot store an image: {e}"))?;
+                Ok(Entry::Image {
+                    sha256,
+                    bytes: bytes.len() as i64,
+                })
+            })
+            .await?;
+        let entry = rendered.map_err(|msg| {
+            AppError::internal(format!(
+                "rendering image {key:?} of level {level} of model {model_id} failed: {msg}"
+            ))
+        })?;
+        if !lumigraph::record_refined(&self.db, model_id, job_id, level, key, &entry).await? {
+            return Err(AppError::NotFound(format!(
+                "model {model_id}'s image repository was rebuilt meanwhile"
+            )));
+        }
+        // A concurrent request may have recorded the key first: serve what is recorded.
+        Ok(lumigraph::entry(&self.db, model_id, level, key)
+            .await?
+            .unwrap_or(entry))
     }
 
     /// How much of model `model_id`'s geometry `user` (none: an anonymous visitor) may

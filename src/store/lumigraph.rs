@@ -109,16 +109,20 @@ pub enum Entry {
 /// Counts of a repository's recorded keys.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, ToSchema)]
 pub struct Counts {
-    /// Grid points recorded.
+    /// Grid points recorded (level 0, the grid the build renders).
     pub points: i64,
-    /// Stored images.
+    /// Stored images of level 0.
     pub images: i64,
-    /// Images that show nothing.
+    /// Images of level 0 that show nothing.
     pub empty: i64,
     /// Grid points inside the object (no images).
     pub inside_points: i64,
-    /// Bytes of the stored images.
+    /// Bytes of the stored images of level 0.
     pub bytes: i64,
+    /// Images of finer levels rendered so far (on first request).
+    pub refined_images: i64,
+    /// Their bytes.
+    pub refined_bytes: i64,
 }
 
 /// A model's repository, if it ever had one.
@@ -222,10 +226,12 @@ pub(super) async fn set_status_tx(
 
 /// Grid points already recorded (a resumed build skips them).
 pub async fn recorded_points(db: &Db, model_id: i64) -> Result<Vec<[u32; 3]>> {
-    let rows = sqlx::query("SELECT DISTINCT x, y, z FROM lumigraph_images WHERE model_id = ?")
-        .bind(model_id)
-        .fetch_all(&db.read)
-        .await?;
+    let rows = sqlx::query(
+        "SELECT DISTINCT x, y, z FROM lumigraph_images WHERE model_id = ? AND level = 0",
+    )
+    .bind(model_id)
+    .fetch_all(&db.read)
+    .await?;
     rows.iter()
         .map(|r| {
             let c = |k: &str| {
@@ -270,8 +276,8 @@ pub async fn record_point(
             Entry::Inside => ("inside", None, 0),
         };
         sqlx::query(
-            "INSERT OR REPLACE INTO lumigraph_images (model_id, x, y, z, d, kind, sha256, bytes)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            "INSERT OR REPLACE INTO lumigraph_images
+             (model_id, level, x, y, z, d, kind, sha256, bytes) VALUES (?, 0, ?, ?, ?, ?, ?, ?, ?)",
         )
         .bind(model_id)
         .bind(point[0])
@@ -306,18 +312,71 @@ pub async fn finish(db: &Db, model_id: i64, job_id: i64, report: &serde_json::Va
     Ok(())
 }
 
-/// What key `(x, y, z, d)` of `model_id`'s repository holds (`None`: not recorded).
-pub async fn entry(db: &Db, model_id: i64, key: [u32; 4]) -> Result<Option<Entry>> {
-    let row = sqlx::query(
-        "SELECT kind, sha256, bytes FROM lumigraph_images
-         WHERE model_id = ? AND x = ? AND y = ? AND z = ? AND d = ?",
+/// Records image `key` of refinement level `level` (rendered on first request) for the
+/// repository job `job_id` built, if it is still the model's ready repository (false when it
+/// was rebuilt or deleted meanwhile). A key recorded meanwhile by a concurrent request stays.
+pub async fn record_refined(
+    db: &Db,
+    model_id: i64,
+    job_id: i64,
+    level: u32,
+    key: [u32; 4],
+    entry: &Entry,
+) -> Result<bool> {
+    let (kind, sha, bytes) = match entry {
+        Entry::Image { sha256, bytes } => ("image", Some(sha256.as_str()), *bytes),
+        Entry::Empty => ("empty", None, 0),
+        Entry::Inside => ("inside", None, 0),
+    };
+    let n = sqlx::query(
+        "INSERT OR IGNORE INTO lumigraph_images
+         (model_id, level, x, y, z, d, kind, sha256, bytes)
+         SELECT ?, ?, ?, ?, ?, ?, ?, ?, ? FROM lumigraphs
+         WHERE model_id = ? AND job_id = ? AND status = 'ready'",
     )
     .bind(model_id)
+    .bind(level)
     .bind(key[0])
     .bind(key[1])
     .bind(key[2])
     .bind(key[3])
-    .fetch_optional(&db.read)
+    .bind(kind)
+    .bind(sha)
+    .bind(bytes)
+    .bind(model_id)
+    .bind(job_id)
+    .execute(&db.write)
+    .await?
+    .rows_affected();
+    if n > 0 {
+        return Ok(true);
+    }
+    Ok(entry_at(&db.write, model_id, level, key).await?.is_some())
+}
+
+/// What key `(x, y, z, d)` of refinement level `level` of `model_id`'s repository holds
+/// (`None`: not recorded).
+pub async fn entry(db: &Db, model_id: i64, level: u32, key: [u32; 4]) -> Result<Option<Entry>> {
+    entry_at(&db.read, model_id, level, key).await
+}
+
+async fn entry_at<'e>(
+    e: impl sqlx::SqliteExecutor<'e>,
+    model_id: i64,
+    level: u32,
+    key: [u32; 4],
+) -> Result<Option<Entry>> {
+    let row = sqlx::query(
+        "SELECT kind, sha256, bytes FROM lumigraph_images
+         WHERE model_id = ? AND level = ? AND x = ? AND y = ? AND z = ? AND d = ?",
+    )
+    .bind(model_id)
+    .bind(level)
+    .bind(key[0])
+    .bind(key[1])
+    .bind(key[2])
+    .bind(key[3])
+    .fetch_optional(e)
     .await?;
     let Some(r) = row else {
         return Ok(None);
@@ -338,11 +397,14 @@ pub async fn entry(db: &Db, model_id: i64, key: [u32; 4]) -> Result<Option<Entry
 /// Counts of `model_id`'s recorded keys.
 pub async fn counts(db: &Db, model_id: i64) -> Result<Counts> {
     let r = sqlx::query(
-        "SELECT COUNT(DISTINCT x || ',' || y || ',' || z) AS points,
-                COALESCE(SUM(kind = 'image'), 0) AS images,
-                COALESCE(SUM(kind = 'empty'), 0) AS empty,
-                COALESCE(SUM(kind = 'inside'), 0) AS inside,
-                COALESCE(SUM(bytes), 0) AS bytes
+        "SELECT COUNT(DISTINCT CASE WHEN level = 0 THEN x || ',' || y || ',' || z END)
+                    AS points,
+                COALESCE(SUM(level = 0 AND kind = 'image'), 0) AS images,
+                COALESCE(SUM(level = 0 AND kind = 'empty'), 0) AS empty,
+                COALESCE(SUM(level = 0 AND kind = 'inside'), 0) AS inside,
+                COALESCE(SUM(CASE WHEN level = 0 THEN bytes END), 0) AS bytes,
+                COALESCE(SUM(level > 0 AND kind = 'image'), 0) AS refined_images,
+                COALESCE(SUM(CASE WHEN level > 0 THEN bytes END), 0) AS refined_bytes
          FROM lumigraph_images WHERE model_id = ?",
     )
     .bind(model_id)
@@ -354,6 +416,8 @@ pub async fn counts(db: &Db, model_id: i64) -> Result<Counts> {
         empty: r.try_get("empty")?,
         inside_points: r.try_get::<i64, _>("inside")? / 6,
         bytes: r.try_get("bytes")?,
+        refined_images: r.try_get("refined_images")?,
+        refined_bytes: r.try_get("refined_bytes")?,
     })
 }
 

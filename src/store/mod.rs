@@ -122,6 +122,11 @@ const MIGRATIONS: &[(i64, &str, &str)] = &[
         "lumigraph",
         include_str!("../../migrations/0009_lumigraph.sql"),
     ),
+    (
+        10,
+        "lumigraph_levels",
+        include_str!("../../migrations/0010_lumigraph_levels.sql"),
+    ),
 ];
 
 impl MigrationSource<'static> for Embedded {

@@ -112,20 +112,26 @@ struct ImageQuery {
     /// The repository's `job_id`: a rebuilt repository answers 404 instead of an image of
     /// another grid (clients put it in the URL so their caches never mix two builds).
     v: Option<i64>,
+    /// Refinement level, 0 (the default: the grid itself) to the description's `levels`;
+    /// `x`, `y`, `z` count that level's points. A finer level's image is rendered the first
+    /// time it is asked for.
+    level: Option<u32>,
 }
 
 /// One image of the repository
 ///
-/// The image of grid point `(x, y, z)` in direction `d` (`docs/FORMAT.md`, "Lumigraph image":
-/// albedo, normals and view depth), immutable: `ETag` its SHA-256, long cache; an image that
-/// shows nothing, or a point inside the object, is `204`.
+/// The image of grid point `(x, y, z)` of refinement level `level` in direction `d`
+/// (`docs/FORMAT.md`, "Lumigraph image": albedo, normals and view depth), immutable: `ETag`
+/// its SHA-256, long cache; an image that shows nothing, or a point inside the object, is
+/// `204`. Images of finer levels (points near the model, for close views) are rendered the
+/// first time they are asked for and stored.
 #[utoipa::path(get, path = "/api/v1/models/{id}/lumigraph/images/{x}/{y}/{z}/{d}",
     tag = "lumigraph",
     params(
         ("id" = i64, Path, description = "model id"),
-        ("x" = u32, Path, description = "grid point, 0 to grid - 1"),
-        ("y" = u32, Path, description = "grid point, 0 to grid - 1"),
-        ("z" = u32, Path, description = "grid point, 0 to grid - 1"),
+        ("x" = u32, Path, description = "grid point, 0 to (grid - 1) * 2^level"),
+        ("y" = u32, Path, description = "grid point, 0 to (grid - 1) * 2^level"),
+        ("z" = u32, Path, description = "grid point, 0 to (grid - 1) * 2^level"),
         ("d" = u32, Path, description = "direction, 0 to 5 (+x, -x, +y, -y, +z, -z)"),
         ImageQuery,
         ("If-None-Match" = Option<String>, Header, description = "an ETag seen before"),
@@ -139,7 +145,7 @@ struct ImageQuery {
             )),
         (status = 204, description = "The image shows nothing (or its point is inside the object)"),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, description = "No repository, a key outside the grid, an image not rendered yet, or another version",
+        (status = 404, description = "No repository, a key outside the grid (or a finer level's point away from the model), an image not rendered yet, or another version",
             body = super::openapi::ErrorBody),
     ),
     security((), ("sessionCookie" = ["viewer"])))]
@@ -152,7 +158,10 @@ async fn image(
 ) -> Result<HttpResponse, ApiError> {
     let (id, x, y, z, d) = path.into_inner();
     reader.model(&state.db, id).await?;
-    match state.lumigraph_image(id, [x, y, z, d], q.v).await? {
+    match state
+        .lumigraph_image(id, q.level.unwrap_or(0), [x, y, z, d], q.v)
+        .await?
+    {
         LumigraphImage::Empty => Ok(HttpResponse::NoContent()
             .insert_header((header::CACHE_CONTROL, IMMUTABLE))
             .finish()),

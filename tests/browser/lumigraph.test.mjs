@@ -96,3 +96,40 @@ test('a model whose geometry stays on the server is seen image-based, with its p
   assert.ok(image.meanAbsDiff < sparse.meanAbsDiff, `the images do not improve the sparse mesh: ${JSON.stringify({ image, sparse })}`);
   await page.close();
 });
+
+test("the viewer's refinement rule is the server's: it asks for no refined point the server refuses", { timeout: 600_000 }, async () => {
+  const { Repository } = await import('../../static/js/lumigraph/repository.js');
+  const model = await importScan(server.api, writeRelief(join(tmp, 'levels.ply'), 120), 'Refined relief');
+  const started = await server.api.post(`/api/v1/models/${model.id}/lumigraph`, { grid: 4, size: 32 });
+  await waitJob(started.job.id);
+  const d = await server.api.get(`/api/v1/models/${model.id}/lumigraph`);
+  assert.ok(d.levels >= 2 && d.model_box, JSON.stringify(d));
+  const repo = new Repository(model.id, d, { onChange: () => {} });
+  let compared = 0;
+  let refused = 0;
+  for (let level = 1; level <= d.levels; level++) {
+    const n = repo.levelPoints(level);
+    const mid = (n - 1) / 2;
+    // Along each axis through the middle: the points on either side of where the level's
+    // region (the model's box widened by its margin) ends.
+    for (let axis = 0; axis < 3; axis++) {
+      const at = (k) => [0, 1, 2].map((a) => (a === axis ? k : a === 2 ? mid + 1 : mid));
+      for (let k = 0; k + 1 < n; k++) {
+        if (repo.refines(level, at(k)) === repo.refines(level, at(k + 1))) continue;
+        for (const j of [k - 1, k, k + 1, k + 2]) {
+          if (j < 0 || j >= n) continue;
+          const [l, p] = Repository.canonical(level, at(j));
+          if (l === 0) continue;
+          const res = await server.api.request('GET', `/api/v1/models/${model.id}/lumigraph/images/${p.join('/')}/${axis * 2}?level=${l}`, { raw: true });
+          const kept = repo.refines(l, p);
+          assert.equal(res.status === 404, !kept, `level ${l} point ${p}: the viewer says ${kept ? 'kept' : 'not kept'}, the server answers ${res.status}`);
+          if (kept) assert.ok(res.status === 200 || res.status === 204, `level ${l} point ${p}: ${res.status}`);
+          compared++;
+          if (!kept) refused++;
+        }
+      }
+    }
+  }
+  assert.ok(compared >= 12 && refused > 0 && refused < compared, `${compared} points compared, ${refused} refused`);
+  repo.close();
+});

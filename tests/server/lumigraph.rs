@@ -39,6 +39,58 @@ fn v3(v: &Value) -> [f32; 3] {
     [0, 1, 2].map(|k| a[k].as_f64().unwrap() as f32)
 }
 
+/// Asserts that `img`, the image of direction `dd` from `eye`, holds the depth the server's
+/// own renderer sees from the camera the description `d` gives (its direction, up, 90°).
+fn assert_depth_is_the_renders(
+    admin: &Client,
+    model: i64,
+    d: &Value,
+    img: &lumi_image::LumigraphImage,
+    eye: [f32; 3],
+    dd: u32,
+) {
+    let side = d["box"]["side"].as_f64().unwrap() as f32;
+    let (n, m) = (img.side as usize, img.depth_side as usize);
+    let direction = &d["directions"][dd as usize];
+    let (f, up) = (v3(&direction["forward"]), v3(&direction["up"]));
+    let target: Vec<f32> = (0..3).map(|k| eye[k] + f[k]).collect();
+    let csv = |v: &[f32]| {
+        v.iter()
+            .map(|c| c.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let buf = Buffers::parse(&admin.get(&format!(
+        "/api/v1/models/{model}/render/buffers?eye={}&target={}&up={}&fovy=90&w={n}&h={n}&buffers=depth",
+        csv(&eye),
+        csv(&target),
+        csv(&up)
+    )));
+    let depth = buf.floats("depth");
+    let (mut compared, mut agree) = (0, 0);
+    for py in 0..m {
+        for px in 0..m {
+            let Some(stored) = img.depth_at(py * m + px) else {
+                continue;
+            };
+            let near = (0..16)
+                .map(|k| depth[(4 * py + k / 4) * n + 4 * px + k % 4])
+                .fold(f32::INFINITY, f32::min);
+            if near.is_finite() {
+                compared += 1;
+                if (near - stored).abs() <= 1e-3 * side {
+                    agree += 1;
+                }
+            }
+        }
+    }
+    assert!(compared > 20, "{compared} pixels compared");
+    assert!(
+        agree as f64 >= 0.95 * compared as f64,
+        "{agree} of {compared} depths agree with the server's render"
+    );
+}
+
 #[test]
 fn an_image_repository_is_built_served_rebuilt_and_deleted() {
     let dir = data_dir_with_admin();
@@ -169,49 +221,65 @@ fn an_image_repository_is_built_served_rebuilt_and_deleted() {
         d["spacing"].as_f64().unwrap() as f32,
     );
     assert!((spacing - side / 2.0).abs() < 1e-4 * side);
-    let eye = [x, y, z]
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| min[k] + i as f32 * spacing)
-        .collect::<Vec<_>>();
-    let direction = &d["directions"][dd as usize];
-    let (f, up) = (v3(&direction["forward"]), v3(&direction["up"]));
-    let target: Vec<f32> = (0..3).map(|k| eye[k] + f[k]).collect();
-    let csv = |v: &[f32]| {
-        v.iter()
-            .map(|c| c.to_string())
-            .collect::<Vec<_>>()
-            .join(",")
+    let at = |level: u32, p: [u32; 3]| -> [f32; 3] {
+        let s = spacing / (1 << level) as f32;
+        [0, 1, 2].map(|k| min[k] + p[k] as f32 * s)
     };
-    let buf = Buffers::parse(&admin.get(&format!(
-        "/api/v1/models/{model}/render/buffers?eye={}&target={}&up={}&fovy=90&w=64&h=64&buffers=depth",
-        csv(&eye),
-        csv(&target),
-        csv(&up)
-    )));
-    let depth = buf.floats("depth");
-    let (mut compared, mut agree) = (0, 0);
-    for py in 0..16usize {
-        for px in 0..16usize {
-            let Some(stored) = img.depth_at(py * 16 + px) else {
-                continue;
-            };
-            let near = (0..16)
-                .map(|k| depth[(4 * py + k / 4) * 64 + 4 * px + k % 4])
-                .fold(f32::INFINITY, f32::min);
-            if near.is_finite() {
-                compared += 1;
-                if (near - stored).abs() <= 1e-3 * side {
-                    agree += 1;
-                }
-            }
-        }
+    assert_depth_is_the_renders(&admin, model, &d, &img, at(0, [x, y, z]), dd);
+
+    // Refinement levels: a point of level 2 just above the model is rendered when first
+    // asked for, stored, and then served like the others; a level-2 name of a level-0 point
+    // is that point; a point away from the model, or a level beyond the finest, is 404.
+    let levels = d["levels"].as_u64().unwrap() as u32;
+    assert!(levels >= 2, "{d}");
+    let model_max = v3(&d["model_box"][1]);
+    let s2 = spacing / 4.0;
+    let above = (model_max[2] - min[2]) / s2;
+    let mut kz = above.ceil() as u32;
+    if kz.is_multiple_of(2) {
+        kz += 1;
     }
-    assert!(compared > 20, "{compared} pixels compared");
-    assert!(
-        agree as f64 >= 0.95 * compared as f64,
-        "{agree} of {compared} depths agree with the server's render"
+    assert!((kz as f32 - above) * s2 <= d["refine_margin"].as_f64().unwrap() as f32 * s2);
+    let stored_before = stored_images(dir.path());
+    let url = format!("{base}/images/4/4/{kz}/5?level=2&v={job}");
+    let r = viewer.get(&url);
+    assert_eq!(r.status, 200, "{}", r.text());
+    let img = lumi_image::decode(&r.body).expect("decodable image");
+    assert!((0..img.depth.len()).any(|i| img.depth_at(i).is_some()));
+    assert_depth_is_the_renders(&admin, model, &d, &img, at(2, [4, 4, kz]), 5);
+    let etag = r.header("etag").unwrap().to_string();
+    let again = viewer.get(&url);
+    assert_eq!(
+        (again.status, again.header("etag")),
+        (200, Some(etag.as_str()))
     );
+    assert_eq!(again.body, r.body);
+    assert_eq!(stored_images(dir.path()), stored_before + 1);
+    let c = viewer.get(&base).json()["counts"].clone();
+    assert_eq!(
+        (c["refined_images"].as_i64(), c["images"].as_i64()),
+        (Some(1), Some(images))
+    );
+    assert_eq!(c["refined_bytes"].as_i64(), Some(r.body.len() as i64));
+    let coarse = viewer.get(&format!("{base}/images/{x}/{y}/{z}/{dd}"));
+    let named_finer = viewer.get(&format!(
+        "{base}/images/{}/{}/{}/{dd}?level=2",
+        4 * x,
+        4 * y,
+        4 * z
+    ));
+    assert_eq!((named_finer.status, &named_finer.body), (200, &coarse.body));
+    let msg = viewer
+        .get(&format!("{base}/images/0/0/1/0?level=2"))
+        .assert_error(404);
+    assert!(msg.contains("not refined"), "{msg}");
+    let msg = viewer
+        .get(&format!("{base}/images/0/0/0/0?level={}", levels + 1))
+        .assert_error(404);
+    assert!(msg.contains("beyond the finest"), "{msg}");
+    viewer
+        .get(&format!("{base}/images/9/0/0/0?level=2"))
+        .assert_error(404);
 
     // Rebuilt on another grid: the old images go, the new ones are served.
     let job2 = start(&admin, model, json!({"grid": 2, "size": 32}));

@@ -3,11 +3,13 @@
 //! sparse mesh without ever receiving the full-resolution geometry.
 //!
 //! - [`grid`]: the viewing box, its grid points, the six axis-aligned 90° cameras of each
-//!   point (§5.2.2, Fig. 16) and the test that tells a point inside the object.
+//!   point (§5.2.2, Fig. 16), the test that tells a point inside the object, and the finer
+//!   levels kept near the model for close views.
 //! - [`image`]: one repository image as stored and served: albedo, normals and view depth of
 //!   the full-resolution surface, so a client can shade it under its own light and project it
 //!   only onto surface the image saw (Fig. 15).
-//! - [`sample`]: one grid point's six images rendered from the hierarchy.
+//! - [`sample`]: one grid point's six images (or one refined image) rendered from the
+//!   hierarchy.
 
 pub mod grid;
 pub mod image;
@@ -15,4 +17,4 @@ pub mod sample;
 
 pub use grid::{DIRECTIONS, Direction, Grid, GridError};
 pub use image::{ImageError, LumigraphImage};
-pub use sample::{PointImages, SampleError, sample_point};
+pub use sample::{PointImages, SampleError, sample_image, sample_point};

@@ -4,7 +4,7 @@
 //! enclosed by the surface as no images at all.
 
 use crate::lod::Culling;
-use crate::render::{Cut, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
+use crate::render::{Cut, Frame, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
 
 use super::grid::Grid;
 use super::image::{self, ImageError};
@@ -59,18 +59,7 @@ pub fn sample_point(
     with_albedo: bool,
     quality: u8,
 ) -> Result<PointImages, SampleError> {
-    let options = RenderOptions {
-        cut: Cut::View {
-            pixel_error: PIXEL_ERROR,
-            culling: Culling {
-                frustum: true,
-                backface: false,
-            },
-        },
-        outputs: OUTPUTS,
-        ambient: 1.0,
-        ..RenderOptions::default()
-    };
+    let options = options();
     let mut frames = Vec::with_capacity(6);
     let mut coverage = [0f32; 6];
     for d in 0..6u32 {
@@ -88,23 +77,63 @@ pub fn sample_point(
     }
     let mut out: [Option<Vec<u8>>; 6] = Default::default();
     for (d, frame) in frames.into_iter().enumerate() {
-        if coverage[d] == 0.0 {
-            continue;
+        if coverage[d] > 0.0 {
+            out[d] = encode(grid.size, &frame, with_albedo, quality)?;
         }
-        let depth = frame
-            .depth
-            .as_deref()
-            .ok_or(SampleError::Missing("depth"))?;
-        let normal = frame
-            .normal
-            .as_deref()
-            .ok_or(SampleError::Missing("normal"))?;
-        let albedo = match (with_albedo, frame.color.as_deref()) {
-            (true, Some(c)) => Some(c),
-            (true, None) => return Err(SampleError::Missing("colour")),
-            (false, _) => None,
-        };
-        out[d] = image::encode(grid.size, albedo, normal, depth, quality)?;
     }
     Ok(PointImages::Images(out))
+}
+
+/// Renders and encodes image `key` = `(x, y, z, d)` of refinement level `level` alone (a refined
+/// point's image, rendered when first asked for: a view that needs it stands outside the
+/// object, so no inside test), `None` where it shows nothing. As [`sample_point`] otherwise.
+pub fn sample_image(
+    renderer: &Renderer,
+    model: &RenderModel,
+    grid: &Grid,
+    level: u32,
+    [x, y, z, d]: [u32; 4],
+    with_albedo: bool,
+    quality: u8,
+) -> Result<Option<Vec<u8>>, SampleError> {
+    let camera = grid.level_camera(level, [x, y, z], d);
+    let frame = renderer.render(model, &camera, &options(), &[])?;
+    encode(grid.size, &frame, with_albedo, quality)
+}
+
+fn options() -> RenderOptions {
+    RenderOptions {
+        cut: Cut::View {
+            pixel_error: PIXEL_ERROR,
+            culling: Culling {
+                frustum: true,
+                backface: false,
+            },
+        },
+        outputs: OUTPUTS,
+        ambient: 1.0,
+        ..RenderOptions::default()
+    }
+}
+
+fn encode(
+    size: u32,
+    frame: &Frame,
+    with_albedo: bool,
+    quality: u8,
+) -> Result<Option<Vec<u8>>, SampleError> {
+    let depth = frame
+        .depth
+        .as_deref()
+        .ok_or(SampleError::Missing("depth"))?;
+    let normal = frame
+        .normal
+        .as_deref()
+        .ok_or(SampleError::Missing("normal"))?;
+    let albedo = match (with_albedo, frame.color.as_deref()) {
+        (true, Some(c)) => Some(c),
+        (true, None) => return Err(SampleError::Missing("colour")),
+        (false, _) => None,
+    };
+    Ok(image::encode(size, albedo, normal, depth, quality)?)
 }

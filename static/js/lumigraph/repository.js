@@ -2,11 +2,15 @@
 // the images of the grid points nearest to the eye, fetched as the view needs them and kept
 // on the GPU in texture arrays that the scene's shader projects onto the sparse mesh.
 //
-// - Points: the `SLOTS` lattice points nearest to the eye (clamped into the viewing box) on the
-//   eye's side of the view's target, so the images' rays are the closest to the view's rays
-//   the repository has.
-// - Faces: of each point, only the directions that see a drawn patch (the bounding cube of each
-//   drawn patch's sphere, seen from the point, names the faces it falls in).
+// - Points: the `SLOTS` lattice points nearest to the image eye on the eye's side of the view's
+//   target, so the images' rays are the closest to the view's rays the repository has. The
+//   image eye lies on the way from the target to the eye, where an image's texel is as fine as
+//   the view's pixel (a 90° image of `size` pixels against the view's field of view and height),
+//   and the lattice is the refinement level whose spacing is at most half its distance to the
+//   target (engine/src/lumigraph/grid.rs, "Refinement levels"; finer levels are kept near the
+//   model only, and their images are rendered on the server when first asked for).
+// - Faces: the fewest images that serve the drawn patches (a greedy cover of sample points of
+//   the patches by the images the shader would weigh within BLEND of the best there).
 // - Requests: nearest point first, at most `maxInFlight` at once, `?v=<job>` in the URL so the
 //   browser cache (the images are immutable) never mixes two builds. Empty images (204) are
 //   remembered and not asked again.
@@ -20,8 +24,16 @@ import { parseImage, pixels } from './image.js';
 /** Grid points whose images are resident at once. */
 export const SLOTS = 4;
 const LAYERS = SLOTS * 6;
-/** The eye moves this share of the grid spacing before the points are chosen again. */
+/** The image eye moves this share of its level's spacing before the points are chosen again. */
 const RESELECT = 0.1;
+/** A level's spacing is at most this share of the image eye's distance to the target. */
+const LEVEL_SPACING = 0.5;
+/** The shader's weight of an image: exp(SHARPNESS (cos - 1)) / depth² (viewer/scene.js). */
+export const SHARPNESS = 40;
+/** An image serves a point where its weight is at least this share of the best image's. */
+const BLEND = 0.3;
+/** Share of a view's sample points left to the sparse mesh rather than fetch one more image. */
+const UNCOVERED = 0.02;
 
 function arrayTexture(side, filter) {
   const data = new Uint8Array(side * side * 4 * LAYERS);
@@ -62,6 +74,9 @@ export class Repository {
     this.depthSide = description.depth_size;
     this.min = description.box.min;
     this.spacing = description.spacing;
+    this.levels = description.levels ?? 0;
+    this.margin = description.refine_margin ?? 0;
+    this.modelBox = description.model_box;
     // Models without colours have no albedo sections: a one-texel array until one arrives.
     this.albedo = arrayTexture(1, THREE.LinearFilter);
     this.normal = arrayTexture(this.side, THREE.LinearFilter);
@@ -75,9 +90,9 @@ export class Repository {
     });
     this.forward = description.directions.map((d) => new THREE.Vector3(...d.forward));
     this.up = description.directions.map((d) => new THREE.Vector3(...d.up));
-    this.slots = new Array(SLOTS).fill(null); // slot -> point key "x,y,z"
-    this.loaded = new Set(); // "x,y,z,d" resident in its slot's layer
-    this.empty = new Set(); // "x,y,z,d" known to show nothing
+    this.slots = new Array(SLOTS).fill(null); // slot -> point key "level:x,y,z"
+    this.loaded = new Set(); // "level:x,y,z,d" resident in its slot's layer
+    this.empty = new Set(); // "level:x,y,z,d" known to show nothing
     this.inFlight = new Set();
     this.failed = new Map();
     this.lastEye = null;
@@ -86,27 +101,88 @@ export class Repository {
     this.closed = false;
   }
 
-  /** Point (x, y, z) in world space. */
-  position(p) {
-    return [0, 1, 2].map((a) => this.min[a] + p[a] * this.spacing);
+  /** Spacing of refinement level `level`. */
+  levelSpacing(level) {
+    return this.spacing / 2 ** level;
+  }
+
+  /** Point `p` = [x, y, z] of level `level` in world space. */
+  position(level, p) {
+    const s = this.levelSpacing(level);
+    return [0, 1, 2].map((a) => this.min[a] + p[a] * s);
+  }
+
+  /** Points per axis of level `level` (grid::level_points). */
+  levelPoints(level) {
+    return (this.n - 1) * 2 ** level + 1;
   }
 
   /**
-   * The `SLOTS` lattice points nearest to `eye` among those on the eye's side of the view's
-   * target (a point beyond it sees the surface from behind: its rays point against the view's).
+   * The point named by its coarsest level (Grid::canonical): a point of level l with even
+   * indices is level l - 1's with half of them.
    */
-  nearest(eye, target) {
-    const n = this.n;
-    const c = [0, 1, 2].map((a) => Math.min(n - 1, Math.max(0, (eye[a] - this.min[a]) / this.spacing)));
+  static canonical(level, p) {
+    while (level > 0 && p.every((v) => v % 2 === 0)) {
+      p = p.map((v) => v / 2);
+      level--;
+    }
+    return [level, p];
+  }
+
+  /** Whether level `level` keeps point `p` (Grid::refines: near the model's bounding box). */
+  refines(level, p) {
+    if (level === 0) return true;
+    if (!this.modelBox) return false;
+    const w = this.position(level, p);
+    // (A thousandth of a spacing more, as the server: the lattice often lands exactly on the
+    // margin, and such a point is then kept whatever the rounding.)
+    const m = (this.margin + 1e-3) * this.levelSpacing(level);
+    return [0, 1, 2].every((a) => w[a] >= this.modelBox[0][a] - m && w[a] <= this.modelBox[1][a] + m);
+  }
+
+  /**
+   * Where images serve the view best, and at which level: `{eye, level}`. A 90° image of
+   * `size` pixels at distance h from the target has texels as fine as the view's pixels
+   * (field of view `fovy`, `height` pixels, at distance d) when h = d · tan(fovy / 2) · size /
+   * height; the level is the coarsest whose spacing is at most LEVEL_SPACING · h, and a
+   * coarser one where that level keeps no point there.
+   */
+  imageEye(camera) {
+    const { eye, target } = camera;
+    const d = Math.hypot(eye[0] - target[0], eye[1] - target[1], eye[2] - target[2]);
+    const fovy = ((camera.fovy ?? 45) * Math.PI) / 180;
+    const ratio = Math.min(1, (Math.tan(fovy / 2) * this.side) / Math.max(1, camera.height ?? this.side));
+    const at = [0, 1, 2].map((a) => target[a] + (eye[a] - target[a]) * ratio);
+    const h = d * ratio;
+    let level = h > 0 ? Math.ceil(Math.log2(this.spacing / (LEVEL_SPACING * h))) : this.levels;
+    level = Math.max(0, Math.min(this.levels, level));
+    while (level > 0) {
+      const s = this.levelSpacing(level);
+      const p = [0, 1, 2].map((a) => Math.round((at[a] - this.min[a]) / s));
+      if (this.refines(level, p)) break;
+      level--;
+    }
+    return { eye: at, level };
+  }
+
+  /**
+   * The `SLOTS` points of `level` nearest to `eye` (the image eye) among those it keeps on the
+   * eye's side of the view's `target` (a point beyond it sees the surface from behind: its
+   * rays point against the view's), as canonical keys.
+   */
+  nearest(eye, target, level, viewEye) {
+    const n = this.levelPoints(level);
+    const s = this.levelSpacing(level);
+    const c = [0, 1, 2].map((a) => Math.min(n - 1, Math.max(0, (eye[a] - this.min[a]) / s)));
     const r = [0, 1, 2].map((a) => Math.round(c[a]));
     const cands = [];
-    const view = [0, 1, 2].map((a) => target[a] - eye[a]);
+    const view = [0, 1, 2].map((a) => target[a] - viewEye[a]);
     for (let dz = -3; dz <= 3; dz++) {
       for (let dy = -3; dy <= 3; dy++) {
         for (let dx = -3; dx <= 3; dx++) {
           const p = [r[0] + dx, r[1] + dy, r[2] + dz];
-          if (p.some((v) => v < 0 || v >= n)) continue;
-          const w = this.position(p);
+          if (p.some((v) => v < 0 || v >= n) || !this.refines(level, p)) continue;
+          const w = this.position(level, p);
           const dist = Math.hypot(w[0] - eye[0], w[1] - eye[1], w[2] - eye[2]);
           const ahead = (target[0] - w[0]) * view[0] + (target[1] - w[1]) * view[1] + (target[2] - w[2]) * view[2];
           cands.push({ p, dist: ahead > 0 ? dist : dist + 1e6 });
@@ -114,7 +190,18 @@ export class Repository {
       }
     }
     cands.sort((a, b) => a.dist - b.dist);
-    return cands.slice(0, SLOTS).map((c) => c.p);
+    return cands.slice(0, SLOTS).map((c) => Repository.canonical(level, c.p));
+  }
+
+  /** Key of point `p` of level `level` (canonical). */
+  static key(level, p) {
+    return `${level}:${p.join(',')}`;
+  }
+
+  /** [level, p] of key `key`. */
+  static parse(key) {
+    const [l, p] = key.split(':');
+    return [Number(l), p.split(',').map(Number)];
   }
 
   /** Face (0..5) of a point that sees direction `v`: its dominant axis, `2 axis + negative`. */
@@ -130,43 +217,92 @@ export class Repository {
    */
   update(camera, drawn, table) {
     if (this.closed) return;
-    const eye = camera.eye;
-    const moved = !this.lastEye || Math.hypot(eye[0] - this.lastEye[0], eye[1] - this.lastEye[1], eye[2] - this.lastEye[2]) > RESELECT * this.spacing;
+    const { eye, level } = this.imageEye(camera);
+    const moved =
+      !this.lastEye || level !== this.lastLevel || Math.hypot(eye[0] - this.lastEye[0], eye[1] - this.lastEye[1], eye[2] - this.lastEye[2]) > RESELECT * this.levelSpacing(level);
     if (moved) {
       this.lastEye = eye.slice();
-      this.assign(this.nearest(eye, camera.target));
+      this.lastLevel = level;
+      this.assign(this.nearest(eye, camera.target, level, camera.eye));
     }
-    const wanted = [];
+    // The faces worth their bytes. At sample points of every drawn patch (its bounding cube's
+    // corners, shrunk by half) an image is good if the shader would weigh it within BLEND of
+    // the best image there (as the shader weighs them: by the angle between the image's ray
+    // and the view's, and 1 / depth²). Images resident or on their way cover their samples;
+    // then, greedily, the image good at most uncovered samples is wanted, until all but
+    // UNCOVERED of them are covered: the few images that serve the view, not every face of
+    // every point that sees some of it (nearby points see nearly the same).
     const b = table.bounds;
+    const at = [];
     for (let s = 0; s < SLOTS; s++) {
       const key = this.slots[s];
       if (key === null) continue;
-      const p = key.split(',').map(Number);
-      const g = this.position(p);
-      const count = new Array(6).fill(0);
-      for (const node of drawn) {
-        const cx = b[node * 4] - g[0];
-        const cy = b[node * 4 + 1] - g[1];
-        const cz = b[node * 4 + 2] - g[2];
-        // The middle of the patch's bounds (its sphere's cube shrunk by half): a face that
-        // sees only a corner of a patch's bounding cube rarely sees the patch.
-        const r = 0.5 * b[node * 4 + 3];
-        for (let k = 0; k < 8; k++) count[this.face([cx + (k & 1 ? r : -r), cy + (k & 2 ? r : -r), cz + (k & 4 ? r : -r)])]++;
+      const [level, p] = Repository.parse(key);
+      at.push({ s, key, level, p, g: this.position(level, p) });
+    }
+    const ce = camera.eye;
+    const now = performance.now();
+    const samples = [];
+    const candidates = new Map();
+    const weights = [];
+    for (const node of drawn) {
+      const r = 0.5 * b[node * 4 + 3];
+      for (let k = 0; k < 8; k++) {
+        const q = [b[node * 4] + (k & 1 ? r : -r), b[node * 4 + 1] + (k & 2 ? r : -r), b[node * 4 + 2] + (k & 4 ? r : -r)];
+        const e = [q[0] - ce[0], q[1] - ce[1], q[2] - ce[2]];
+        const el = Math.hypot(e[0], e[1], e[2]) || 1;
+        weights.length = 0;
+        let best = 0;
+        for (const a of at) {
+          const v = [q[0] - a.g[0], q[1] - a.g[1], q[2] - a.g[2]];
+          const d = this.face(v);
+          const z = Math.abs(v[d >> 1]);
+          const id = `${a.key},${d}`;
+          if (z <= 0 || this.empty.has(id)) continue;
+          const failedAt = this.failed.get(id);
+          if (failedAt !== undefined && now - failedAt < 3000) continue;
+          const c = (v[0] * e[0] + v[1] * e[1] + v[2] * e[2]) / (el * Math.hypot(v[0], v[1], v[2]));
+          if (c <= 0) continue;
+          const w = (Math.exp(SHARPNESS * (c - 1)) + 1e-6) / (z * z);
+          weights.push({ id, a, d, w });
+          best = Math.max(best, w);
+        }
+        const good = [];
+        let covered = false;
+        for (const { id, a, d, w } of weights) {
+          if (w < BLEND * best) continue;
+          good.push(id);
+          if (!candidates.has(id)) candidates.set(id, { a, d });
+          if (this.loaded.has(id) || this.inFlight.has(id)) covered = true;
+        }
+        if (good.length > 0 && !covered) samples.push(good);
       }
-      for (let d = 0; d < 6; d++) {
-        if (count[d] === 0) continue;
-        const id = `${key},${d}`;
-        if (this.loaded.has(id) || this.empty.has(id) || this.inFlight.has(id)) continue;
-        const failedAt = this.failed.get(id);
-        if (failedAt !== undefined && performance.now() - failedAt < 3000) continue;
-        wanted.push({ slot: s, p, d, id, priority: s * 1e6 - count[d] });
+    }
+    const wanted = [];
+    let open = samples;
+    const floor = UNCOVERED * samples.length;
+    while (open.length > floor && wanted.length < LAYERS) {
+      const count = new Map();
+      for (const good of open) for (const id of good) count.set(id, (count.get(id) || 0) + 1);
+      let pick = null;
+      let most = 0;
+      for (const [id, n] of count) {
+        const c = candidates.get(id);
+        // (Ties go to the point nearest the image eye: the lower slot.)
+        if (n > most || (n === most && pick && c.a.s < candidates.get(pick).a.s)) {
+          pick = id;
+          most = n;
+        }
       }
+      if (!pick) break;
+      const { a, d } = candidates.get(pick);
+      wanted.push({ slot: a.s, level: a.level, p: a.p, d, id: pick, priority: wanted.length });
+      open = open.filter((good) => !good.includes(pick));
     }
     wanted.sort((a, b) => a.priority - b.priority);
     this.waiting = wanted.length;
     // A user's bandwidth cap (token bucket holding at most B·T bytes, as patch streaming's).
     const cap = this.settings.bandwidth;
-    const now = performance.now();
     if (cap > 0) this.tokens = Math.min(cap * this.settings.maxWait, this.tokens + ((now - this.tokensAt) / 1000) * cap);
     this.tokensAt = now;
     for (const w of wanted) {
@@ -187,7 +323,7 @@ export class Repository {
 
   /** Keeps the slots of points still wanted, gives the others' slots to the new points. */
   assign(points) {
-    const keys = points.map((p) => p.join(','));
+    const keys = points.map(([level, p]) => Repository.key(level, p));
     const staying = new Set(keys.filter((k) => this.slots.includes(k)));
     const incoming = keys.filter((k) => !staying.has(k));
     for (let s = 0; s < SLOTS; s++) {
@@ -201,17 +337,18 @@ export class Repository {
         this.points[s].set(0, 0, 0, 0);
         continue;
       }
-      const w = this.position(key.split(',').map(Number));
+      const w = this.position(...Repository.parse(key));
       this.points[s].set(w[0], w[1], w[2], 1);
     }
   }
 
   async request(w) {
-    const key = w.p.join(',');
+    const key = Repository.key(w.level, w.p);
     this.inFlight.add(w.id);
     this.stats.requests++;
     try {
-      const url = `/api/v1/models/${this.modelId}/lumigraph/images/${w.p[0]}/${w.p[1]}/${w.p[2]}/${w.d}?v=${this.d.job_id}`;
+      const level = w.level > 0 ? `&level=${w.level}` : '';
+      const url = `/api/v1/models/${this.modelId}/lumigraph/images/${w.p[0]}/${w.p[1]}/${w.p[2]}/${w.d}?v=${this.d.job_id}${level}`;
       const res = await this.fetch(url, { credentials: 'same-origin' });
       if (res.status === 204) {
         this.empty.add(w.id);
