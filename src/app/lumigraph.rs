@@ -298,15 +298,14 @@ impl super::App {
                 "rendering image {key:?} of level {level} of model {model_id} failed: {msg}"
             ))
         })?;
-        if !lumigraph::record_refined(&self.db, model_id, job_id, level, key, &entry).await? {
-            return Err(AppError::NotFound(format!(
-                "model {model_id}'s image repository was rebuilt meanwhile"
-            )));
-        }
-        // A concurrent request may have recorded the key first: serve what is recorded.
-        Ok(lumigraph::entry(&self.db, model_id, level, key)
+        // A concurrent request may have recorded the key first: what is recorded is served.
+        lumigraph::record_refined(&self.db, model_id, job_id, level, key, entry)
             .await?
-            .unwrap_or(entry))
+            .ok_or_else(|| {
+                AppError::NotFound(format!(
+                    "model {model_id}'s image repository was rebuilt meanwhile"
+                ))
+            })
     }
 
     /// How much of model `model_id`'s geometry `user` (none: an anonymous visitor) may

@@ -106,6 +106,17 @@ pub enum Entry {
     Inside,
 }
 
+impl Entry {
+    /// The row's `kind`, `sha256` and `bytes`.
+    fn columns(&self) -> (&'static str, Option<&str>, i64) {
+        match self {
+            Entry::Image { sha256, bytes } => ("image", Some(sha256.as_str()), *bytes),
+            Entry::Empty => ("empty", None, 0),
+            Entry::Inside => ("inside", None, 0),
+        }
+    }
+}
+
 /// Counts of a repository's recorded keys.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, ToSchema)]
 pub struct Counts {
@@ -270,11 +281,7 @@ pub async fn record_point(
         return Ok(false);
     }
     for (d, e) in entries.iter().enumerate() {
-        let (kind, sha, bytes) = match e {
-            Entry::Image { sha256, bytes } => ("image", Some(sha256.as_str()), *bytes),
-            Entry::Empty => ("empty", None, 0),
-            Entry::Inside => ("inside", None, 0),
-        };
+        let (kind, sha, bytes) = e.columns();
         sqlx::query(
             "INSERT OR REPLACE INTO lumigraph_images
              (model_id, level, x, y, z, d, kind, sha256, bytes) VALUES (?, 0, ?, ?, ?, ?, ?, ?, ?)",
@@ -313,21 +320,18 @@ pub async fn finish(db: &Db, model_id: i64, job_id: i64, report: &serde_json::Va
 }
 
 /// Records image `key` of refinement level `level` (rendered on first request) for the
-/// repository job `job_id` built, if it is still the model's ready repository (false when it
-/// was rebuilt or deleted meanwhile). A key recorded meanwhile by a concurrent request stays.
+/// repository job `job_id` built, if it is still the model's ready repository, and returns
+/// what the key holds: `entry`, or what a concurrent request recorded first (it stays);
+/// `None` when the repository was rebuilt or deleted meanwhile.
 pub async fn record_refined(
     db: &Db,
     model_id: i64,
     job_id: i64,
     level: u32,
     key: [u32; 4],
-    entry: &Entry,
-) -> Result<bool> {
-    let (kind, sha, bytes) = match entry {
-        Entry::Image { sha256, bytes } => ("image", Some(sha256.as_str()), *bytes),
-        Entry::Empty => ("empty", None, 0),
-        Entry::Inside => ("inside", None, 0),
-    };
+    entry: Entry,
+) -> Result<Option<Entry>> {
+    let (kind, sha, bytes) = entry.columns();
     let n = sqlx::query(
         "INSERT OR IGNORE INTO lumigraph_images
          (model_id, level, x, y, z, d, kind, sha256, bytes)
@@ -349,9 +353,9 @@ pub async fn record_refined(
     .await?
     .rows_affected();
     if n > 0 {
-        return Ok(true);
+        return Ok(Some(entry));
     }
-    Ok(entry_at(&db.write, model_id, level, key).await?.is_some())
+    entry_at(&db.write, model_id, level, key).await
 }
 
 /// What key `(x, y, z, d)` of refinement level `level` of `model_id`'s repository holds
