@@ -193,3 +193,68 @@ fn markup_with_one_stroke_a_side_selects_the_bump() {
         plate.len()
     );
 }
+
+#[test]
+fn a_segment_click_selects_the_whole_segment_with_positions_from_its_leaves() {
+    use meshwiki_engine::lod::LodFile;
+    use meshwiki_engine::select::point::PickedPoint;
+    use meshwiki_engine::select::suggest::select_segment;
+
+    let b = bump();
+    let file = SegmentFile::open(&segment::path_for(&b.lod)).unwrap();
+    let lod = LodFile::open(&b.lod).unwrap();
+    let leaves = lod.nodes().iter().filter(|n| n.level == 0).count();
+    // Clicks on the bump's top, its flank and the plate's corner region.
+    for (i, j) in [(60, 60), (60, 80), (12, 15)] {
+        let v = (j * N + i) as u32;
+        let picked = PickedPoint {
+            position: position(i, j),
+            vertex: v,
+            x: 0,
+            y: 0,
+        };
+        for scale in 0..file.scales() {
+            let chosen = select_segment(&lod, &file, &picked, scale, None).unwrap();
+            let members = file.members(scale, chosen.segment).unwrap();
+            assert_eq!(Some(chosen.segment), file.segment_of(v, scale));
+            assert!(members.contains(v));
+            let bp = &chosen.backprojection;
+            assert_eq!(bp.vertices, members, "scale {scale}");
+            // Every member was found in the leaves, at its own position.
+            assert_eq!(bp.positions.len() as u64, members.len(), "scale {scale}");
+            for &(id, p) in &bp.positions {
+                let q = b.mesh.positions[id as usize];
+                let d = (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f32::max);
+                assert!(d < 1e-3, "vertex {id}: {p:?} against {q:?}");
+            }
+            let n = members.len() as f64;
+            for k in 0..3 {
+                let mean = members
+                    .iter()
+                    .map(|m| b.mesh.positions[m as usize][k] as f64)
+                    .sum::<f64>()
+                    / n;
+                assert!(
+                    (bp.sum[k] / n - mean).abs() < 1e-3,
+                    "scale {scale} axis {k}"
+                );
+            }
+            // The walk reads the leaves around the segment, not the model.
+            if scale == 0 {
+                assert!(
+                    bp.leaves * 3 < leaves,
+                    "{} of {leaves} leaves read",
+                    bp.leaves
+                );
+            }
+        }
+    }
+    // A scale the file does not have is an error, not a panic.
+    let picked = PickedPoint {
+        position: position(60, 60),
+        vertex: (60 * N + 60) as u32,
+        x: 0,
+        y: 0,
+    };
+    assert!(select_segment(&lod, &file, &picked, file.scales(), None).is_err());
+}

@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::render::Outputs;
+use meshwiki_engine::segment::SegmentFile;
 use meshwiki_engine::select::graph_cut::CutStats;
 use meshwiki_engine::select::mask::{MaskError, StrokeMask};
 use meshwiki_engine::select::modes::{self, Mode, VertexSet};
@@ -22,6 +23,7 @@ use meshwiki_engine::select::point::PickedPoint;
 use meshwiki_engine::select::{
     EnergyParams, Input, SelectError, Tool, ViewSelectError, select_on_view,
 };
+use roaring::RoaringBitmap;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 use utoipa::ToSchema;
@@ -61,6 +63,8 @@ pub enum ToolName {
     HeavyLasso,
     /// A click: a point part.
     Point,
+    /// A click: the whole surface segment under it at a scale (suggested regions).
+    Segment,
 }
 
 impl ToolName {
@@ -69,7 +73,7 @@ impl ToolName {
             ToolName::Lasso => Some(Tool::Lasso),
             ToolName::Markup => Some(Tool::Markup),
             ToolName::HeavyLasso => Some(Tool::HeavyLasso),
-            ToolName::Point => None,
+            ToolName::Point | ToolName::Segment => None,
         }
     }
 
@@ -77,6 +81,7 @@ impl ToolName {
     pub fn as_str(self) -> &'static str {
         match self {
             ToolName::Point => "point",
+            ToolName::Segment => "segment",
             t => t.engine().map_or("point", Tool::as_str),
         }
     }
@@ -130,7 +135,8 @@ impl ViewCamera {
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SelectionRequest {
-    /// Tool (`point` needs `point` and no mask; the others need the stroke mask).
+    /// Tool (`point` and `segment` need `point` and no mask; the others need the stroke
+    /// mask).
     pub tool: ToolName,
     /// How the result combines with the base (default `replace`; the point tool only
     /// replaces; `subtract` needs a non-empty base).
@@ -138,9 +144,13 @@ pub struct SelectionRequest {
     pub mode: Mode,
     /// The view the strokes were drawn on (or the click made on).
     pub camera: ViewCamera,
-    /// Point tool: the clicked pixel `[x, y]`.
+    /// Point and segment tools: the clicked pixel `[x, y]`.
     #[serde(default)]
     pub point: Option<[f32; 2]>,
+    /// Segment tool: the scale of the model's surface segments (0: finest; default: the
+    /// suggested scale of `GET /api/v1/models/{id}/segments`).
+    #[serde(default)]
+    pub scale: Option<u32>,
     /// A part of this model to edit: its vertex set is the base of add/subtract, and
     /// confirming updates it (not with `base`).
     #[serde(default)]
@@ -179,6 +189,71 @@ fn view_error(e: ViewSelectError) -> AppError {
         ViewSelectError::Render(e) => AppError::Render(e.into()),
         ViewSelectError::Select(e) => select_error(e),
     }
+}
+
+/// 409: a segment request on a model built before surface segments.
+fn no_segments(model_id: i64) -> AppError {
+    AppError::Conflict(format!(
+        "model {model_id} has no surface segments (it was built before them): rebuild it"
+    ))
+}
+
+/// The scale asked for (default: the suggested one), checked against the model's.
+fn checked_scale(
+    segments: &SegmentFile,
+    model_id: i64,
+    scale: Option<u32>,
+) -> Result<usize, AppError> {
+    let scale = scale.map_or(segments.suggested_scale(), |s| s as usize);
+    if scale >= segments.scales() {
+        return Err(AppError::invalid(format!(
+            "scale {scale} does not exist: model {model_id}'s segments have scales 0 to {}",
+            segments.scales() - 1
+        )));
+    }
+    Ok(scale)
+}
+
+// ---- surface segments -----------------------------------------------------------------------
+
+/// A segment: its scale and its number there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+pub struct SegmentRef {
+    /// Scale (0: finest).
+    pub scale: u32,
+    /// Number of the segment at that scale.
+    pub id: u32,
+}
+
+/// One scale of a model's surface segments.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct SegmentScale {
+    /// Scale (0: finest).
+    pub scale: u32,
+    /// Segments at this scale.
+    pub segments: u32,
+}
+
+/// A model's surface segments (`GET /api/v1/models/{id}/segments`).
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct SegmentScales {
+    /// Model.
+    pub model_id: i64,
+    /// Every scale, finest first (each coarser one has about half the segments).
+    pub scales: Vec<SegmentScale>,
+    /// The scale a viewer offers first: the finest with at most 48 segments.
+    pub suggested_scale: u32,
+}
+
+/// A segment's vertices (`GET /api/v1/models/{id}/segments/{scale}/vertices`).
+#[derive(Debug, Clone)]
+pub struct SegmentMembers {
+    /// The segment.
+    pub segment: SegmentRef,
+    /// Its original vertex ids.
+    pub vertices: RoaringBitmap,
+    /// Identifies the model's build (the segments change only with it).
+    pub build: String,
 }
 
 // ---- drafts ---------------------------------------------------------------------------------
@@ -247,8 +322,10 @@ pub struct SelectionDraft {
     pub added: u64,
     /// Vertices of the base that are not in the draft.
     pub removed: u64,
-    /// Point tool: the picked point.
+    /// Point and segment tools: the picked point.
     pub point: Option<PickedPoint>,
+    /// Segment tool: the segment selected.
+    pub segment: Option<SegmentRef>,
     /// Stroke tools: the graph cut's statistics.
     pub graph: Option<CutStats>,
     /// Back-projection statistics.
@@ -445,21 +522,34 @@ impl App {
         }
 
         // The strokes.
+        if request.scale.is_some() && request.tool != ToolName::Segment {
+            return Err(AppError::invalid(
+                "`scale` belongs to the segment tool only",
+            ));
+        }
         let (stroke, click) = match request.tool {
-            ToolName::Point => {
+            ToolName::Point | ToolName::Segment => {
+                let tool = request.tool.as_str();
                 let p = request.point.ok_or_else(|| {
-                    AppError::invalid("the point tool needs `point`: [x, y] in pixels")
+                    AppError::invalid(format!("the {tool} tool needs `point`: [x, y] in pixels"))
                 })?;
-                if request.mode != Mode::Replace {
+                if request.tool == ToolName::Point && request.mode != Mode::Replace {
                     return Err(AppError::invalid(
                         "the point tool only replaces (mode replace)",
                     ));
+                }
+                if mask_bytes.is_some() {
+                    return Err(AppError::invalid(format!(
+                        "the {tool} tool takes a click, not a stroke mask"
+                    )));
                 }
                 (None, Some(p))
             }
             _ => {
                 if request.point.is_some() {
-                    return Err(AppError::invalid("`point` belongs to the point tool only"));
+                    return Err(AppError::invalid(
+                        "`point` belongs to the point and segment tools only",
+                    ));
                 }
                 let bytes = mask_bytes.ok_or_else(|| {
                     AppError::invalid("the request needs a `mask` field: the stroke mask PNG")
@@ -478,6 +568,16 @@ impl App {
             .models
             .open(&self.db, model_id, Purpose::Select)
             .await?;
+        let scale = match request.tool {
+            ToolName::Segment => {
+                let segments = open
+                    .render
+                    .segments()
+                    .ok_or_else(|| no_segments(model_id))?;
+                Some(checked_scale(segments, model_id, request.scale)?)
+            }
+            _ => None,
+        };
 
         // The base: a part being edited, or a previous draft.
         let mut part_updated_at = None;
@@ -545,9 +645,10 @@ impl App {
         let tool = request.tool.engine();
         let (outcome, _hold) = service
             .run(ticket, move |r| {
-                let input = match (click, tool, stroke.as_ref()) {
-                    (Some(p), _, _) => Input::Click(p),
-                    (None, Some(tool), Some(mask)) => Input::Strokes {
+                let input = match (click, scale, tool, stroke.as_ref()) {
+                    (Some(point), Some(scale), _, _) => Input::Segment { point, scale },
+                    (Some(p), None, _, _) => Input::Click(p),
+                    (None, _, Some(tool), Some(mask)) => Input::Strokes {
                         tool,
                         mask,
                         params: &params,
@@ -598,6 +699,10 @@ impl App {
             added,
             removed,
             point: outcome.picked,
+            segment: outcome.segment.map(|(scale, id)| SegmentRef {
+                scale: scale as u32,
+                id,
+            }),
             graph: outcome.cut.clone(),
             backprojection: BackprojectionStats {
                 drawn_patches: outcome.backprojection.drawn_nodes,
@@ -644,6 +749,69 @@ impl App {
             info,
             created: Instant::now(),
         }))
+    }
+
+    /// The surface segments of model `model_id`: its scales (409 when it has none).
+    pub async fn segment_scales(&self, model_id: i64) -> Result<SegmentScales, AppError> {
+        let open = self
+            .models
+            .open(&self.db, model_id, Purpose::Select)
+            .await?;
+        let segments = open
+            .render
+            .segments()
+            .ok_or_else(|| no_segments(model_id))?;
+        Ok(SegmentScales {
+            model_id,
+            scales: (0..segments.scales())
+                .map(|s| SegmentScale {
+                    scale: s as u32,
+                    segments: segments.count(s),
+                })
+                .collect(),
+            suggested_scale: segments.suggested_scale() as u32,
+        })
+    }
+
+    /// The segment at `scale` of model `model_id` that holds original vertex `vertex`, with
+    /// all its vertices (what the viewer previews under the cursor before a segment click);
+    /// 404 when the vertex is in no segment.
+    pub async fn segment_members(
+        &self,
+        model_id: i64,
+        scale: u32,
+        vertex: u32,
+    ) -> Result<SegmentMembers, AppError> {
+        let open = self
+            .models
+            .open(&self.db, model_id, Purpose::Select)
+            .await?;
+        let segments = open
+            .render
+            .segments()
+            .ok_or_else(|| no_segments(model_id))?;
+        let scale = checked_scale(segments, model_id, Some(scale))?;
+        let id = segments.segment_of(vertex, scale).ok_or_else(|| {
+            AppError::NotFound(format!(
+                "vertex {vertex} of model {model_id} lies in no surface segment"
+            ))
+        })?;
+        let build = open.etag.trim_matches('"').to_string();
+        let open2 = open.clone();
+        let vertices = tokio::task::spawn_blocking(move || {
+            open2.render.segments().and_then(|s| s.members(scale, id))
+        })
+        .await
+        .map_err(AppError::internal)?
+        .ok_or_else(|| AppError::internal(format!("segment {id} at scale {scale} unreadable")))?;
+        Ok(SegmentMembers {
+            segment: SegmentRef {
+                scale: scale as u32,
+                id,
+            },
+            vertices,
+            build,
+        })
     }
 
     /// Confirms draft `draft_id` of `user_id`: creates a part (`true`) or updates the part it

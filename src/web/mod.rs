@@ -21,6 +21,7 @@ pub mod pages;
 pub mod parts;
 pub mod render;
 pub mod search;
+pub mod segments;
 pub mod selections;
 pub mod session;
 pub mod static_files;
@@ -96,6 +97,7 @@ pub fn configure(cfg: &mut web::ServiceConfig) {
     lumigraph::configure(cfg);
     parts::configure(cfg);
     selections::configure(cfg);
+    segments::configure(cfg);
     render::configure(cfg);
     contents::configure(cfg);
     assignments::configure(cfg);

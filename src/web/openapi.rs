@@ -95,6 +95,7 @@ pub fn document() -> Value {
         super::lumigraph::Api::openapi(),
         super::parts::Api::openapi(),
         super::selections::Api::openapi(),
+        super::segments::Api::openapi(),
         super::render::Api::openapi(),
         super::contents::Api::openapi(),
         super::assignments::Api::openapi(),

@@ -3,8 +3,10 @@
 //!
 //! `POST /api/v1/models/{id}/selections` (editors) takes a multipart form with
 //!
-//! * `request`: JSON `{"tool", "mode", "camera", "point", "part_id", "base", "params",
-//!   "pixel_error"}` — `tool` is `lasso`, `markup`, `heavy_lasso` or `point`; `mode` is
+//! * `request`: JSON `{"tool", "mode", "camera", "point", "scale", "part_id", "base", "params",
+//!   "pixel_error"}` — `tool` is `lasso`, `markup`, `heavy_lasso`, `point` or `segment` (a
+//!   click selecting the whole surface segment under it at `scale`, see [`super::segments`]);
+//!   `mode` is
 //!   `replace` (default), `add` or `subtract`; `camera` is the view the strokes were drawn on
 //!   (`eye`, `target`, `up`, `fovy` in degrees, `width` and `height` in pixels); `point` the
 //!   clicked pixel `[x, y]` of the point tool; `part_id` a part to edit (its vertex set is the
@@ -13,8 +15,8 @@
 //!   weights ([`EnergyParams`]); `pixel_error` the cut's threshold (default 1 px);
 //! * `mask`: the stroke mask, a PNG of the camera's size whose grey levels are labels:
 //!   0 none, 1 foreground, 2 background, 3 heavy band, 4 lasso inside
-//!   ([`meshwiki_engine::select::mask`]). The point tool needs no mask (the request may then
-//!   be sent as plain JSON).
+//!   ([`meshwiki_engine::select::mask`]). The point and segment tools need no mask (the
+//!   request may then be sent as plain JSON).
 //!
 //! The server renders colour, normal, depth and id buffers for that camera on the render pool
 //! (the same admission, worker and memory limits as every render), cuts

@@ -68,6 +68,7 @@ pub const JS_MODULES: &[(&str, &str)] = js_modules![
     "select/highlight.js",
     "select/png.js",
     "select/raster.js",
+    "select/segments.js",
     "select/session.js",
     "select/tools.js",
     "viewer/drawer.js",

@@ -219,6 +219,18 @@ test('every operation answers as documented on a running server', { timeout: 600
   await call('get', '/api/v1/selections/{draft}', { draft: other.id }, { expect: 404 });
   await call('post', '/api/v1/models/{id}/selections', { id: modelId }, { json: { ...pick, tool: 'brush' }, expect: 400 });
 
+  // Surface segments: the scales, a segment's vertices (and 304), a segment click.
+  const scales = (await call('get', '/api/v1/models/{id}/segments', { id: modelId }, { expect: 200 })).data;
+  const scale = scales.suggested_scale;
+  const seg = await call('get', '/api/v1/models/{id}/segments/{scale}/vertices', { id: modelId, scale }, { query: { vertex: draft.point.vertex }, expect: 200 });
+  assert.ok(seg.headers.get('x-segment'), 'X-Segment names the segment');
+  await call('get', '/api/v1/models/{id}/segments/{scale}/vertices', { id: modelId, scale }, { query: { vertex: draft.point.vertex }, headers: { 'If-None-Match': seg.headers.get('etag') }, expect: 304 });
+  await call('get', '/api/v1/models/{id}/segments/{scale}/vertices', { id: modelId, scale: scales.scales.length }, { query: { vertex: 0 }, expect: 400 });
+  await call('get', '/api/v1/models/{id}/segments/{scale}/vertices', { id: modelId, scale }, { query: { vertex: 4000000000 }, expect: 404 });
+  const segmentDraft = (await call('post', '/api/v1/models/{id}/selections', { id: modelId }, { json: { ...pick, tool: 'segment', scale }, expect: 201 })).data;
+  assert.equal(segmentDraft.segment.id, Number(seg.headers.get('x-segment')));
+  await call('delete', '/api/v1/selections/{draft}', { draft: segmentDraft.id }, { expect: 204 });
+
   // Contents: edits, a conflict, history, diff, revert, preview.
   await call('post', '/api/v1/preview', {}, { json: { body: '*Preview*' }, expect: 200 });
   const content = (await call('post', '/api/v1/contents', {}, { json: { title: 'Apse', caption: 'East end', body: 'First *text*.' }, expect: 201 })).data;

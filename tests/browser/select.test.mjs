@@ -343,6 +343,102 @@ describe('the selection tools on the real server', () => {
     await page.close();
   });
 
+  test('segments: the segment under the cursor is previewed, a click selects it whole, Shift-click adds one', async (t) => {
+    if (!rendering) return t.skip('no renderer on this machine');
+    const page = await browser.page();
+    await login(page, server.base, ADMIN);
+    await page.goto(`${server.base}/models/${model.id}`);
+    await waitViewer(page, settled);
+    await capture(page, 'segments');
+    const c = await surfaceCentre(page, 'segments');
+    const tools = page.locator('.select-tools');
+    const canvas = page.locator('.viewer-canvas');
+    await tools.locator('button[data-tool=segment]').click();
+    let s = await waitSelection(page, (s) => s.tool === 'segment' && s.segmentScale !== null);
+    const scales = await server.api.get(`/api/v1/models/${model.id}/segments`);
+    assert.equal(s.segmentScale, scales.suggested_scale);
+    assert.ok(await tools.locator('.select-scale').isVisible(), 'no segment size control');
+    assert.match(await tools.locator('.select-scale-count').textContent(), new RegExp(`${scales.scales[s.segmentScale].segments} segments`));
+
+    // The previewed segment under a canvas point (null: none), once the hover settled.
+    const b = await canvas.boundingBox();
+    const hover = async (x, y) => {
+      await page.mouse.move(b.x + x, b.y + y);
+      return (await poll(page, () => window.meshwikiViewer.selection(), (s) => !s.segmentPending, 10_000)).segment;
+    };
+    // A point well inside a segment: the same one 8 px around it (so the client's pick on
+    // the drawn patches and the server's on the full-resolution scan agree).
+    const inside = async (x, y) => {
+      const a = await hover(x, y);
+      if (!a) return null;
+      for (const [dx, dy] of [[8, 0], [-8, 0], [0, 8], [0, -8]]) {
+        const n = await hover(x + dx, y + dy);
+        if (!n || n.id !== a.id) return null;
+      }
+      return hover(x, y);
+    };
+    const candidates = [];
+    for (let ring = 0; ring < 4; ring++) {
+      for (let k = 0; k < (ring === 0 ? 1 : 8); k++) {
+        const a = (k / 8) * Math.PI * 2;
+        candidates.push({ x: c.x + Math.cos(a) * ring * 25, y: c.y + Math.sin(a) * ring * 25 });
+      }
+    }
+    let first = null;
+    let second = null;
+    for (const p of candidates) {
+      const seg = await inside(p.x, p.y);
+      if (!seg) continue;
+      if (!first) first = { ...p, seg };
+      else if (seg.id !== first.seg.id) {
+        second = { ...p, seg };
+        break;
+      }
+    }
+    assert.ok(first && second, 'no two segments found well inside under the cursor');
+    // The preview is the segment's exact vertex set, found in the resident patches.
+    await hover(first.x, first.y);
+    s = await waitSelection(page, (s) => s.segment && s.segment.id === first.seg.id && s.segment.matched > 0);
+    await shot(page, 'select-segment-hover');
+
+    // A click selects it whole: the draft is the segment the preview showed.
+    await page.mouse.click(b.x + first.x, b.y + first.y);
+    s = await waitSelection(page, (s) => s.drafts.length === 1 || s.error !== '');
+    assert.equal(s.error, '', 'the segment click failed');
+    assert.equal(s.drafts[0].tool, 'segment');
+    assert.equal(s.drafts[0].vertex_count, first.seg.size);
+    assert.equal(await shownVertexCount(page), first.seg.size);
+    assert.ok(s.matched > 0, 'the draft is not highlighted');
+
+    // Shift-click adds the second segment (disjoint at one scale).
+    await page.keyboard.down('Shift');
+    await page.mouse.click(b.x + second.x, b.y + second.y);
+    await page.keyboard.up('Shift');
+    s = await waitSelection(page, (s) => s.drafts.length === 2 || s.error !== '');
+    assert.equal(s.error, '', 'the added segment failed');
+    assert.equal(s.drafts[1].mode, 'add');
+    assert.equal(s.drafts[1].vertex_count, first.seg.size + second.seg.size);
+    await shot(page, 'select-segment-added');
+
+    // A finer size: more segments, and the preview follows at that scale.
+    if (s.segmentScale > 0) {
+      const finer = s.segmentScale - 1;
+      await tools.locator('.select-scale input').evaluate((el, v) => {
+        el.value = String(v);
+        el.dispatchEvent(new Event('input', { bubbles: true }));
+      }, finer);
+      s = await waitSelection(page, (s) => s.segmentScale === finer);
+      assert.match(await tools.locator('.select-scale-count').textContent(), new RegExp(`${scales.scales[finer].segments} segments`));
+      await hover(first.x + 1, first.y);
+      s = await poll(page, () => window.meshwikiViewer.selection(), (s) => s.segment && s.segment.scale === finer, 10_000);
+      assert.ok(s.segment.size <= first.seg.size, 'a finer segment is larger than the coarser one holding it');
+    }
+    await page.keyboard.press('Escape');
+    s = await waitSelection(page, (s) => s.tool === null);
+    assert.equal(s.drafts.length, 0);
+    await page.close();
+  });
+
   test('viewers get no selection tools', async () => {
     const page = await browser.page();
     await page.context().clearCookies();

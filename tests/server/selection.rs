@@ -497,3 +497,223 @@ fn selections_drafts_parts_history_isolation_and_bad_input() {
     let msg = select(&alice, pending, &lasso_req, &left).assert_error(409);
     assert!(msg.contains("ready"), "{msg}");
 }
+
+/// The segment at `scale` holding `vertex`, as the server answers it: its number and set.
+fn segment_of(c: &Client, model: i64, scale: u64, vertex: u64) -> (u32, RoaringBitmap) {
+    let r = c.get(&format!(
+        "/api/v1/models/{model}/segments/{scale}/vertices?vertex={vertex}"
+    ));
+    let id = r
+        .header("x-segment")
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("X-Segment: {}", r.text()));
+    (id, set_of(&r))
+}
+
+/// The original vertex the point tool picks at pixel `p` of `camera()`.
+fn picked_vertex(c: &Client, model: i64, p: [f32; 2]) -> u64 {
+    let r = c.post(
+        &format!("/api/v1/models/{model}/selections"),
+        &json!({"tool": "point", "camera": camera(), "point": p}),
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    r.json()["point"]["vertex"].as_u64().unwrap()
+}
+
+#[test]
+fn segment_clicks_select_whole_surface_segments() {
+    let dir = data_dir_with_admin();
+    let server = Server::start(dir.path());
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let alice = create_user(&server, &admin, "alice", "editor");
+    let viewer = create_user(&server, &admin, "vic", "viewer");
+    let scans = tempfile::tempdir().unwrap();
+    let ply = relief_ply(scans.path(), "relief.ply", 30_000);
+    let r = upload_scan(&admin, "Relief", "relief.ply", std::fs::read(&ply).unwrap());
+    assert_eq!(r.status, 202, "{}", r.text());
+    let model = r.json()["model"]["id"].as_i64().unwrap();
+    let job = wait_finished(&admin, r.json()["job"]["id"].as_i64().unwrap(), 300);
+    assert_eq!(job["status"], "done", "{job}");
+    let probe = alice.post(
+        &format!("/api/v1/models/{model}/selections"),
+        &json!({"tool": "point", "camera": camera(), "point": [160.0, 120.0]}),
+    );
+    if probe.status == 503 {
+        let msg = probe.text();
+        if std::env::var("MESHWIKI_REQUIRE_GPU_TESTS").is_ok_and(|v| v == "1") {
+            panic!("no renderer: {msg}");
+        }
+        eprintln!("SKIPPED: selection tests need a Vulkan adapter (lavapipe): {msg}");
+        return;
+    }
+
+    // The scales: finest first, each coarser with fewer segments; readers may list them.
+    let scales = viewer.get(&format!("/api/v1/models/{model}/segments"));
+    assert_eq!(scales.status, 200, "{}", scales.text());
+    let scales = scales.json();
+    let counts: Vec<u64> = scales["scales"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["segments"].as_u64().unwrap())
+        .collect();
+    assert!(counts.len() >= 3, "{scales}");
+    assert!(counts.windows(2).all(|w| w[1] < w[0]), "{counts:?}");
+    let suggested = scales["suggested_scale"].as_u64().unwrap();
+    assert!(counts[suggested as usize] <= 48, "{scales}");
+    assert!(
+        suggested == 0 || counts[suggested as usize - 1] > 48,
+        "{scales}"
+    );
+
+    // What the file says, read independently: every vertex's segment, one by one.
+    let file = meshwiki_engine::segment::SegmentFile::open(
+        &dir.path().join("models").join(format!("{model}.mwseg")),
+    )
+    .unwrap();
+    let lod = meshwiki_engine::lod::LodFile::open(
+        &dir.path().join("models").join(format!("{model}.mwlod")),
+    )
+    .unwrap();
+    let mut positions = std::collections::HashMap::new();
+    for (n, rec) in lod.nodes().iter().enumerate() {
+        if rec.level == 0 {
+            let p = lod.patch(n as u32).unwrap();
+            for (&id, &pos) in p.original_ids.iter().zip(&p.positions) {
+                positions.insert(id, pos);
+            }
+        }
+    }
+    let v1 = probe.json()["point"]["vertex"].as_u64().unwrap();
+    let v2 = picked_vertex(&alice, model, [60.0, 60.0]);
+    for scale in [0, suggested / 2, suggested] {
+        let (id, set) = segment_of(&viewer, model, scale, v1);
+        let brute: RoaringBitmap = (0..file.vertices() as u32)
+            .filter(|&v| file.segment_of(v, scale as usize) == Some(id))
+            .collect();
+        assert!(set.contains(v1 as u32));
+        assert_eq!(set, brute, "scale {scale}");
+    }
+
+    // A click selects the whole segment there: the same set, with a centre on it.
+    let (id1, b1) = segment_of(&alice, model, suggested, v1);
+    let (id2, b2) = segment_of(&alice, model, suggested, v2);
+    assert_ne!(id1, id2, "the two pixels should lie in different segments");
+    let click = |p: [f32; 2], mode: &str, base: Option<&str>| {
+        let mut req = json!({"tool": "segment", "mode": mode, "camera": camera(), "point": p,
+                             "scale": suggested});
+        if let Some(b) = base {
+            req["base"] = json!(b);
+        }
+        let r = alice.post(&format!("/api/v1/models/{model}/selections"), &req);
+        assert_eq!(r.status, 201, "{}", r.text());
+        r.json()
+    };
+    let d1 = click([160.0, 120.0], "replace", None);
+    assert_eq!(d1["tool"], "segment");
+    assert_eq!(d1["kind"], "region");
+    assert_eq!(d1["segment"]["id"].as_u64(), Some(id1 as u64));
+    assert_eq!(d1["segment"]["scale"].as_u64(), Some(suggested));
+    assert_eq!(d1["vertex_count"].as_u64(), Some(b1.len()));
+    assert!(d1["selected_pixels"].as_u64().unwrap() >= 1, "{d1}");
+    let d1_id = d1["id"].as_str().unwrap();
+    assert_eq!(draft_set(&alice, d1_id), b1);
+    // The centre is a vertex of the segment, near the mean of all its vertices (every one of
+    // them was found in the leaves, the view's hidden side included).
+    let c: Vec<f32> = (0..3)
+        .map(|k| d1["center"][k].as_f64().unwrap() as f32)
+        .collect();
+    let members: Vec<[f32; 3]> = b1.iter().map(|v| positions[&v]).collect();
+    assert!(
+        members
+            .iter()
+            .any(|p| p[0] == c[0] && p[1] == c[1] && p[2] == c[2]),
+        "{d1}"
+    );
+    let mean: Vec<f32> = (0..3)
+        .map(|k| members.iter().map(|p| p[k]).sum::<f32>() / members.len() as f32)
+        .collect();
+    let spread = members
+        .iter()
+        .map(|p| (0..3).map(|k| (p[k] - mean[k]).powi(2)).sum::<f32>().sqrt())
+        .fold(0.0, f32::max);
+    let off = (0..3).map(|k| (c[k] - mean[k]).powi(2)).sum::<f32>().sqrt();
+    assert!(
+        off <= spread * 0.5 + 1e-6,
+        "centre {c:?} mean {mean:?} spread {spread}"
+    );
+
+    // Shift-click adds the other segment; Alt-click takes the first away again.
+    let d2 = click([60.0, 60.0], "add", Some(d1_id));
+    let union = &b1 | &b2;
+    assert_eq!(draft_set(&alice, d2["id"].as_str().unwrap()), union);
+    assert_eq!(d2["added"].as_u64(), Some(union.len() - b1.len()));
+    let d3 = click([160.0, 120.0], "subtract", d2["id"].as_str());
+    assert_eq!(draft_set(&alice, d3["id"].as_str().unwrap()), &b2 - &b1);
+
+    // Confirmed: a region part holding exactly the segment.
+    let r = alice.post(&format!("/api/v1/selections/{d1_id}/confirm"), &json!({}));
+    assert_eq!(r.status, 201, "{}", r.text());
+    let pid = r.json()["id"].as_i64().unwrap();
+    assert_eq!(
+        set_of(&alice.get(&format!("/api/v1/parts/{pid}/vertices"))),
+        b1
+    );
+
+    // Bad input: clear 4xx.
+    let seg = |extra: Value| {
+        let mut req = json!({"tool": "segment", "camera": camera(), "point": [160.0, 120.0]});
+        for (k, v) in extra.as_object().unwrap() {
+            req[k] = v.clone();
+        }
+        alice.post(&format!("/api/v1/models/{model}/selections"), &req)
+    };
+    seg(json!({"scale": counts.len()})).assert_error(400);
+    seg(json!({"point": null})).assert_error(400);
+    seg(json!({"tool": "lasso", "scale": 1})).assert_error(400);
+    // Without a scale: the suggested one.
+    let r = seg(json!({}));
+    assert_eq!(r.status, 201, "{}", r.text());
+    assert_eq!(r.json()["segment"]["scale"].as_u64(), Some(suggested));
+    let r = select_with(
+        &alice,
+        model,
+        &json!({"tool": "segment", "camera": camera(), "point": [160.0, 120.0]}),
+        Some((&lasso(100, 70, 220, 170).encode_png(), "image/png")),
+    );
+    r.assert_error(400);
+    viewer
+        .post(
+            &format!("/api/v1/models/{model}/selections"),
+            &json!({"tool": "segment", "camera": camera(), "point": [160.0, 120.0]}),
+        )
+        .assert_error(403);
+    let base = format!("/api/v1/models/{model}/segments");
+    viewer
+        .get(&format!("{base}/{}/vertices?vertex=0", counts.len()))
+        .assert_error(400);
+    viewer
+        .get(&format!("{base}/0/vertices?vertex=4000000000"))
+        .assert_error(404);
+    viewer
+        .get(&format!("{base}/0/vertices?vertex=x"))
+        .assert_error(400);
+    viewer
+        .get("/api/v1/models/999999/segments")
+        .assert_error(404);
+
+    // A model built before segments: 409 with a message, for the list and for a click.
+    drop(server);
+    std::fs::remove_file(dir.path().join("models").join(format!("{model}.mwseg"))).unwrap();
+    let server = Server::start(dir.path());
+    let alice = server.login("alice", "alice-password-1");
+    let r = alice.get(&base);
+    r.assert_error(409);
+    assert!(r.text().contains("rebuild"), "{}", r.text());
+    alice
+        .post(
+            &format!("/api/v1/models/{model}/selections"),
+            &json!({"tool": "segment", "camera": camera(), "point": [160.0, 120.0]}),
+        )
+        .assert_error(409);
+}

@@ -21,6 +21,7 @@ use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use memmap2::Mmap;
+use roaring::RoaringBitmap;
 
 use super::merge::Hierarchy;
 
@@ -28,6 +29,9 @@ use super::merge::Hierarchy;
 pub const MAGIC: [u8; 8] = *b"MWSEG\0\0\x01";
 /// A vertex in no segment.
 pub const NONE: u32 = u32::MAX;
+/// Segments at the scale first offered for picking whole segments
+/// ([`SegmentFile::suggested_scale`]): about as many as a user tells apart at a glance.
+pub const SUGGESTED_SEGMENTS: u32 = 48;
 
 /// Why a segment file could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -181,6 +185,42 @@ impl SegmentFile {
         })
     }
 
+    /// The segment at `scale` of original vertex `vertex` (`None`: a vertex in no face, or
+    /// beyond the file, or a scale it does not have).
+    pub fn segment_of(&self, vertex: u32, scale: usize) -> Option<u32> {
+        self.at_scale(scale, self.fine_of(vertex)?)
+    }
+
+    /// The original vertices of segment `segment` at `scale` (`None`: no such segment): its
+    /// fine segments are marked, then the per-vertex array is read once in id order.
+    pub fn members(&self, scale: usize, segment: u32) -> Option<RoaringBitmap> {
+        if scale >= self.scales() || segment >= self.count(scale) {
+            return None;
+        }
+        let inside: Vec<bool> = (0..self.fine)
+            .map(|f| self.at_scale(scale, f) == Some(segment))
+            .collect();
+        let bytes = &self.map[self.vertex_at..self.vertex_at + 4 * self.vertices as usize];
+        let ids = bytes.chunks_exact(4).enumerate().filter_map(|(v, b)| {
+            let f = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            inside
+                .get(f as usize)
+                .copied()
+                .unwrap_or(false)
+                .then_some(v as u32)
+        });
+        // Ids come in increasing order, so this cannot fail.
+        RoaringBitmap::from_sorted_iter(ids).ok()
+    }
+
+    /// The scale a viewer offers first for picking whole segments: the finest with at most
+    /// [`SUGGESTED_SEGMENTS`] segments (the coarsest when none has so few).
+    pub fn suggested_scale(&self) -> usize {
+        (0..self.scales())
+            .find(|&s| self.count(s) <= SUGGESTED_SEGMENTS)
+            .unwrap_or(self.scales() - 1)
+    }
+
     /// The boundary strength of segment `segment` at `scale` when it was merged into a
     /// larger one (+∞: never; see [`super::merge::Hierarchy::strengths`]).
     pub fn strength(&self, scale: usize, segment: u32) -> f32 {
@@ -274,6 +314,17 @@ mod tests {
         assert_eq!(f.strength(1, 1), 3.0);
         assert_eq!(f.strength(2, 0), f32::INFINITY);
         assert_eq!(f.strength(1, 2), f32::INFINITY);
+        // A segment's vertices at each scale; vertices in no face belong to none.
+        let members = |scale, seg| f.members(scale, seg).map(|b| b.iter().collect::<Vec<_>>());
+        assert_eq!(members(0, 2), Some(vec![3]));
+        assert_eq!(members(1, 0), Some(vec![0, 1]));
+        assert_eq!(members(1, 1), Some(vec![3, 4]));
+        assert_eq!(members(2, 0), Some(vec![0, 1, 3, 4]));
+        assert_eq!((members(1, 2), members(3, 0)), (None, None));
+        assert_eq!((f.segment_of(4, 1), f.segment_of(2, 1)), (Some(1), None));
+        assert_eq!(f.segment_of(4, 3), None);
+        // Every scale has at most SUGGESTED_SEGMENTS here: the finest is offered.
+        assert_eq!(f.suggested_scale(), 0);
 
         // Truncated, wrong magic, a label beyond its scale: errors, never a panic.
         let bytes = std::fs::read(&path).unwrap();

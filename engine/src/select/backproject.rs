@@ -92,6 +92,43 @@ impl BackProjection {
     }
 }
 
+/// A selected full-resolution vertex: original id, position, normal.
+pub type Hit = (u32, [f32; 3], [f32; 3]);
+
+impl BackProjection {
+    /// The selection of the vertices `hits` (in any order; a vertex shared by neighbouring
+    /// leaves may come more than once), counted against `base`: the id set, the position
+    /// sums, the centre, normal and extent, and the anchor (statistics left at zero).
+    pub fn of_hits(mut hits: Vec<Hit>, base: Option<&RoaringBitmap>) -> Result<Self, SelectError> {
+        hits.sort_unstable_by_key(|h| h.0);
+        hits.dedup_by_key(|h| h.0);
+        let mut out = BackProjection {
+            vertices: RoaringBitmap::from_sorted_iter(hits.iter().map(|h| h.0))
+                .map_err(|e| SelectError::BadParams(format!("unsorted ids: {e}")))?,
+            ..BackProjection::default()
+        };
+        for &(id, p, _) in &hits {
+            for (s, &c) in out.sum.iter_mut().zip(&p) {
+                *s += c as f64;
+            }
+            if base.is_some_and(|b| b.contains(id)) {
+                out.count_in_base += 1;
+                for (s, &c) in out.sum_in_base.iter_mut().zip(&p) {
+                    *s += c as f64;
+                }
+            }
+        }
+        let positions: Vec<[f32; 3]> = hits.iter().map(|h| h.1).collect();
+        let normals: Vec<[f32; 3]> = hits.iter().map(|h| h.2).collect();
+        out.geometry = PartGeometry::from_points(&positions, &normals);
+        out.anchor = out
+            .geometry
+            .and_then(|g| nearest(hits.iter().map(|h| (h.0, h.1)), g.center));
+        out.positions = hits.into_iter().map(|h| (h.0, h.1)).collect();
+        Ok(out)
+    }
+}
+
 /// Summed-area table of the selected pixels.
 struct Integral {
     w: usize,
@@ -254,7 +291,7 @@ pub fn back_project(
         let f = |s: f32| if s.is_finite() { s } else { 0.0 };
         f(sx) + f(sy)
     };
-    type Found = (Vec<(u32, [f32; 3], [f32; 3])>, u64);
+    type Found = (Vec<Hit>, u64);
     let found: Vec<Found> = leaves
         .par_iter()
         .map(|&leaf| {
@@ -319,34 +356,18 @@ pub fn back_project(
             Ok((hits, patch.positions.len() as u64))
         })
         .collect::<Result<_, SelectError>>()?;
-    let mut hits: Vec<(u32, [f32; 3], [f32; 3])> = Vec::new();
-    for (h, tested) in found {
-        out.vertices_tested += tested;
+    let mut hits: Vec<Hit> = Vec::new();
+    let mut tested = 0;
+    for (h, t) in found {
+        tested += t;
         hits.extend(h);
     }
-    // Border vertices are shared by neighbouring leaves: keep each id once.
-    hits.sort_unstable_by_key(|h| h.0);
-    hits.dedup_by_key(|h| h.0);
-    out.vertices = RoaringBitmap::from_sorted_iter(hits.iter().map(|h| h.0))
-        .map_err(|e| SelectError::BadParams(format!("unsorted ids: {e}")))?;
-    for &(id, p, _) in &hits {
-        for (s, &c) in out.sum.iter_mut().zip(&p) {
-            *s += c as f64;
-        }
-        if base.is_some_and(|b| b.contains(id)) {
-            out.count_in_base += 1;
-            for (s, &c) in out.sum_in_base.iter_mut().zip(&p) {
-                *s += c as f64;
-            }
-        }
-    }
-    let positions: Vec<[f32; 3]> = hits.iter().map(|h| h.1).collect();
-    let normals: Vec<[f32; 3]> = hits.iter().map(|h| h.2).collect();
-    out.geometry = PartGeometry::from_points(&positions, &normals);
-    out.anchor = out
-        .geometry
-        .and_then(|g| nearest(hits.iter().map(|h| (h.0, h.1)), g.center));
-    out.positions = hits.into_iter().map(|h| (h.0, h.1)).collect();
+    let drawn_nodes = out.drawn_nodes;
+    let leaves_reached = out.leaves;
+    out = BackProjection::of_hits(hits, base)?;
+    out.drawn_nodes = drawn_nodes;
+    out.leaves = leaves_reached;
+    out.vertices_tested = tested;
     out.ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok(out)
 }

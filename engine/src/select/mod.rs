@@ -31,6 +31,7 @@ pub mod pipeline;
 pub mod point;
 pub mod seeds;
 pub mod segments;
+pub mod suggest;
 
 pub use backproject::{BackProjectOptions, BackProjection, back_project};
 pub use buffers::Buffers;
@@ -79,6 +80,9 @@ pub enum SelectError {
     /// The max-flow solver rejected the graph (a bug: capacities are built finite).
     #[error("graph cut failed: {0}")]
     Graph(#[from] maxflow::GraphError),
+    /// A segment click on a model built without surface segments.
+    #[error("this model has no surface segments (it was built before them): rebuild it")]
+    NoSegments,
     /// A patch of the model cannot be read.
     #[error("patch {node} cannot be read: {message}")]
     Patch { node: u32, message: String },

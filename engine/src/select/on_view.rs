@@ -16,6 +16,7 @@ use super::graph_cut::CutStats;
 use super::mask::{self, StrokeMask};
 use super::pipeline::{Tool, select_pixels};
 use super::point::{self, PickedPoint};
+use super::suggest::select_segment;
 use crate::camera::Camera;
 use crate::lod::Culling;
 use crate::render::{Cut, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
@@ -34,6 +35,14 @@ pub enum Input<'a> {
     },
     /// A click at pixel `[x, y]`: the nearest visible vertex (a point part).
     Click([f32; 2]),
+    /// A click at pixel `point`: the whole surface segment there at `scale` (suggested
+    /// regions, [`super::suggest`]).
+    Segment {
+        /// The clicked pixel `[x, y]`.
+        point: [f32; 2],
+        /// The segments' scale (0: fine).
+        scale: usize,
+    },
 }
 
 /// The result on the view.
@@ -43,6 +52,8 @@ pub struct ViewSelection {
     pub backprojection: BackProjection,
     /// The click's picked point.
     pub picked: Option<PickedPoint>,
+    /// A segment click: the segment's scale and number.
+    pub segment: Option<(usize, u32)>,
     /// Selected pixels.
     pub selected_pixels: usize,
     /// The selected pixels as a PNG (alpha 255 where selected).
@@ -89,7 +100,7 @@ fn window(input: &Input<'_>, camera: &Camera) -> Option<[u32; 4]> {
         (x0 < x1 && y0 < y1).then_some([x0, y0, x1 - x0, y1 - y0])
     };
     match *input {
-        Input::Click([x, y]) => {
+        Input::Click([x, y]) | Input::Segment { point: [x, y], .. } => {
             if !(x.is_finite() && y.is_finite() && x >= 0.0 && y >= 0.0) {
                 return None;
             }
@@ -160,8 +171,38 @@ pub fn select_on_view(
                 selected_pixels: 1,
                 mask_png: mask::selection_png(w, h, &selected),
                 cut: None,
+                segment: None,
                 render_ms,
                 cut_ms: t.elapsed().as_secs_f64() * 1e3,
+                seeds_ms: 0.0,
+            })
+        }
+        Input::Segment {
+            point: [x, y],
+            scale,
+        } => {
+            let file = model.segments().ok_or(SelectError::NoSegments)?;
+            let picked = point::pick(model.lod(), camera, &buffers, x, y)?;
+            let cut_ms = t.elapsed().as_secs_f64() * 1e3;
+            let chosen = select_segment(model.lod(), file, &picked, scale, base)?;
+            // The view's pixels showing the segment (where the window was drawn).
+            let selected: Vec<bool> = (0..buffers.len())
+                .map(|i| {
+                    buffers.covered(i)
+                        && file.segment_of(buffers.vertex[i], scale) == Some(chosen.segment)
+                })
+                .collect();
+            let mut backprojection = chosen.backprojection;
+            backprojection.ms = t.elapsed().as_secs_f64() * 1e3 - cut_ms;
+            Ok(ViewSelection {
+                selected_pixels: selected.iter().filter(|s| **s).count(),
+                mask_png: mask::selection_png(w, h, &selected),
+                backprojection,
+                picked: Some(picked),
+                cut: None,
+                segment: Some((chosen.scale, chosen.segment)),
+                render_ms,
+                cut_ms,
                 seeds_ms: 0.0,
             })
         }
@@ -183,6 +224,7 @@ pub fn select_on_view(
                 cut: sel.cut,
                 backprojection,
                 picked: None,
+                segment: None,
                 render_ms,
                 cut_ms,
                 seeds_ms: sel.seeds_ms,

@@ -11,6 +11,7 @@ import { StrokeLayer } from './draw.js';
 import { DraftHighlight } from './highlight.js';
 import { encodeMask } from './png.js';
 import { fitSize, rasterise } from './raster.js';
+import { SegmentPreview } from './segments.js';
 import { SelectionSession } from './session.js';
 import { SelectTools } from './tools.js';
 
@@ -19,6 +20,7 @@ const HINTS = {
   markup: 'paint on the region, then around it with Shift (background)',
   heavy_lasso: 'trace the boundary with one thick closed stroke',
   point: 'click a surface point',
+  segment: 'hover to preview a surface segment, click to select it (Shift: add, Alt: subtract)',
 };
 const MIN_LASSO_AREA_PX = 4;
 
@@ -38,7 +40,8 @@ export class SelectController {
    *   pauseNavigation: (on: boolean) => void, highlightChanged: () => void,
    *   partConfirmed: (part: object, created: boolean) => Promise<void>,
    *   assignDone: (partId: number) => void, contentsChanged: (partId: number) => void,
-   *   partTitle: (id: number) => string}} host
+   *   partTitle: (id: number) => string,
+   *   pick: (clientX: number, clientY: number) => {vertex: number|null}|null}} host
    */
   constructor(root, stage, host) {
     this.host = host;
@@ -46,6 +49,8 @@ export class SelectController {
     this.session = new SelectionSession(host.modelId, this.api, () => this.render());
     if (host.limits) this.session.limits = { ...host.limits };
     this.highlight = new DraftHighlight(host.modelId, host.radius, host.vertices);
+    this.segments = new SegmentPreview(host.modelId, this.api, host.radius, host.vertices, () => host.highlightChanged());
+    this.hovered = null; // the pointer over the view (segment tool), followed once a frame
     this.tool = null;
     this.mode = 'replace';
     this.background = false;
@@ -71,13 +76,18 @@ export class SelectController {
         confirm: () => this.confirm(),
         cancel: () => this.cancel(),
         editRegion: () => this.editRegion(),
+        setScale: (scale) => {
+          this.segments.setScale(scale);
+          this.render();
+        },
       },
       { brush: this.brushes.heavy_lasso },
     );
     this.layer = new StrokeLayer(stage, {
       brush: (e) => this.brush(e),
       onStroke: (s) => this.stroke(s),
-      onClick: (p) => this.click(p),
+      onClick: (p, keys) => this.click(p, keys),
+      onHover: (p) => this.hover(p),
     });
     // The step opens in the view's drawer (the viewer adopts `assign.root`).
     this.assign = new AssignStep(stage, stage, this.api, {
@@ -143,6 +153,8 @@ export class SelectController {
         return { kind: 'heavy', width: this.brushes.heavy_lasso };
       case 'point':
         return { kind: 'point', width: 1 };
+      case 'segment':
+        return { kind: 'segment', width: 1 };
       case 'markup': {
         const bg = this.background || (e && (e.shiftKey || e.altKey || e.button === 2 || (e.buttons & 2) !== 0));
         return { kind: bg ? 'background' : 'foreground', width: this.brushes.markup };
@@ -156,6 +168,12 @@ export class SelectController {
     this.tool = tool;
     this.endGroup();
     this.hint = tool ? HINTS[tool] : '';
+    if (tool === 'segment') {
+      this.segments.load().then(() => {
+        if (this.segments.unavailable && this.tool === 'segment') this.setError(this.segments.unavailable);
+        this.render();
+      });
+    } else this.segments.hover(null);
     this.layer.setActive(tool !== null);
     this.host.pauseNavigation(tool !== null);
     this.render();
@@ -193,6 +211,11 @@ export class SelectController {
       editing: this.session.partId,
       openPart: this.openPart,
       hint: this.hint,
+      segments: {
+        scale: this.segments.scale,
+        scales: this.segments.scales ? this.segments.scales.length : 0,
+        count: this.segments.count,
+      },
     });
     if (this.tool in this.brushes) this.tools.brush.value = String(this.brushes[this.tool]);
     this.layer.setDisabled(this.busy && this.tool !== 'markup');
@@ -249,12 +272,39 @@ export class SelectController {
     if (g.pending) await this.sendMarkup(view);
   }
 
-  async click(p) {
-    if (this.tool !== 'point' || this.busy) return;
+  /** The pointer over the view: the segment tool previews the segment under it (once a frame). */
+  hover(p) {
+    if (this.tool !== 'segment') return;
+    const pending = this.hovered !== null;
+    this.hovered = p;
+    if (p === null) {
+      this.segments.hover(null);
+      return;
+    }
+    if (pending) return;
+    requestAnimationFrame(() => {
+      const q = this.hovered;
+      this.hovered = null;
+      if (!q || this.tool !== 'segment') return;
+      const hit = this.host.pick(q.clientX, q.clientY);
+      this.segments.hover(hit ? hit.vertex : null);
+    });
+  }
+
+  async click(p, keys = {}) {
+    if ((this.tool !== 'point' && this.tool !== 'segment') || this.busy) return;
     const view = this.host.camera();
     const size = fitSize(view.width, view.height, await this.session.viewLimits());
-    const request = { tool: 'point', mode: 'replace', camera: this.requestCamera(view, size), point: [p.x * size.sx, p.y * size.sy] };
-    await this.request(request, null, {});
+    const point = [p.x * size.sx, p.y * size.sy];
+    const camera = this.requestCamera(view, size);
+    if (this.tool === 'point') {
+      await this.request({ tool: 'point', mode: 'replace', camera, point }, null, {});
+      return;
+    }
+    await this.segments.load();
+    if (this.segments.scale === null) return;
+    const mode = keys.shiftKey ? 'add' : keys.altKey ? 'subtract' : this.mode;
+    await this.request({ tool: 'segment', mode, camera, point, scale: this.segments.scale }, null, {});
   }
 
   /** Rasterises `strokes` for the view, sends them; true when a draft came back. */
@@ -354,6 +404,9 @@ export class SelectController {
         height: d.height,
       })),
       matched: this.highlight.matched(),
+      segment: this.segments.shown ? { ...this.segments.shown, matched: this.segments.highlight.matched() } : null,
+      segmentScale: this.segments.scale,
+      segmentPending: this.hovered !== null || this.segments.fetching,
       error: this.error,
       assigning: this.assign.isOpen() ? this.assign.partId : null,
       limits: { ...this.session.limits },

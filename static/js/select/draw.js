@@ -16,9 +16,12 @@ const STYLE = {
 export class StrokeLayer {
   /**
    * @param {HTMLElement} stage the viewer's stage (positioned)
-   * @param {{onStroke: (stroke: object) => void, onClick: (p: {x: number, y: number}) => void,
+   * @param {{onStroke: (stroke: object) => void,
+   *   onClick: (p: {x: number, y: number}, keys: {shiftKey: boolean, altKey: boolean}) => void,
+   *   onHover?: (p: {x: number, y: number, clientX: number, clientY: number}|null) => void,
    *   brush: () => {kind: string, width: number} | null}} handlers `brush()` says what a drag
-   *   draws now (null: the layer is inactive)
+   *   draws now (null: the layer is inactive); `onHover` follows the pointer while no stroke
+   *   is drawn (null: it left the view)
    */
   constructor(stage, handlers) {
     this.stage = stage;
@@ -88,6 +91,7 @@ export class StrokeLayer {
     });
     c.addEventListener('pointermove', (e) => {
       this.cursor = { ...this.point(e), brush: this.handlers.brush(e) };
+      if (!this.current && this.handlers.onHover) this.handlers.onHover({ ...this.point(e), clientX: e.clientX, clientY: e.clientY });
       const s = this.current;
       if (s && e.pointerId === s.pointerId) {
         const p = this.point(e);
@@ -110,7 +114,7 @@ export class StrokeLayer {
         const last = s.points[s.points.length - 1];
         if (Math.hypot(p.x - last.x, p.y - last.y) > 0) s.points.push(p);
         const stroke = { kind: s.kind, width: s.width, points: s.points, moved: s.moved };
-        if (s.kind === 'point') this.handlers.onClick(s.points[0]);
+        if (s.kind === 'point' || s.kind === 'segment') this.handlers.onClick(s.points[0], { shiftKey: e.shiftKey, altKey: e.altKey });
         else this.handlers.onStroke(stroke);
       }
       this.redraw();
@@ -119,6 +123,7 @@ export class StrokeLayer {
     c.addEventListener('pointercancel', (e) => finish(e, true));
     c.addEventListener('pointerleave', () => {
       this.cursor = null;
+      if (this.handlers.onHover) this.handlers.onHover(null);
       this.redraw();
     });
   }
@@ -140,7 +145,7 @@ export class StrokeLayer {
     for (const s of this.kept) this.drawStroke(s);
     if (this.current) this.drawStroke(this.current);
     const cur = this.cursor;
-    if (cur && cur.brush && cur.brush.kind !== 'lasso' && cur.brush.kind !== 'point') {
+    if (cur && cur.brush && !['lasso', 'point', 'segment'].includes(cur.brush.kind)) {
       g.beginPath();
       g.arc(cur.x, cur.y, Math.max(1, cur.brush.width / 2), 0, Math.PI * 2);
       g.strokeStyle = 'rgba(255, 255, 255, 0.8)';
@@ -153,7 +158,7 @@ export class StrokeLayer {
   drawStroke(s) {
     const g = this.g;
     const pts = s.points;
-    if (pts.length === 0 || s.kind === 'point') return;
+    if (pts.length === 0 || s.kind === 'point' || s.kind === 'segment') return;
     const style = STYLE[s.kind];
     g.beginPath();
     g.moveTo(pts[0].x, pts[0].y);

@@ -1,4 +1,5 @@
-// The draft's exact highlight: the draft's vertex set (a roaring bitmap of original ids, from
+// The draft's exact highlight (and, with another instance, the segment previewed under the
+// cursor, select/segments.js): the draft's vertex set (a roaring bitmap of original ids, from
 // `GET /api/v1/selections/{draft}/vertices`) matched against every resident patch by the same
 // machinery as the parts' highlights (PartStore), so the preview is exact at every level of
 // detail and follows streaming.
@@ -28,12 +29,19 @@ export class DraftHighlight {
 
   /** Shows `draft` (its JSON) with its vertex set `bitmap`; null clears. */
   show(draft, bitmap) {
+    this.showSet(draft && bitmap ? draft.id : null, bitmap, draft ? draft.center : null);
+  }
+
+  /** Shows the vertex set `bitmap` under the name `key` (null clears; the same key again
+   * changes nothing). */
+  showSet(key, bitmap, center = null) {
+    if (key !== null && key === this.draftId) return;
     this.store.parts.clear();
     this.draftId = null;
-    if (draft && bitmap) {
-      const entry = this.store.put({ id: DRAFT, center: draft.center || [0, 0, 0], vertex_count: draft.vertex_count, updated_at: draft.id }, []);
+    if (key !== null && bitmap) {
+      const entry = this.store.put({ id: DRAFT, center: center || [0, 0, 0], vertex_count: bitmap.size, updated_at: key }, []);
       entry.bitmap = bitmap;
-      this.draftId = draft.id;
+      this.draftId = key;
     }
     this.store.reindexAll();
   }

@@ -1,12 +1,13 @@
 // The *Select* group of the viewer's toolbar (editors and admins): the tools (lasso, markup,
-// heavy lasso, point), the mode (replace, add, subtract), the markup's background toggle, the
-// brush width, undo / confirm / cancel, *Edit region* for the part open in the panel, the
+// heavy lasso, segments, point), the mode (replace, add, subtract), the markup's background
+// toggle, the brush width, the segments' scale, undo / confirm / cancel, *Edit region* for the part open in the panel, the
 // draft's vertex count and the server's error messages.
 
 const TOOLS = [
   ['lasso', 'Lasso', 'Drag a polygon around the region'],
   ['markup', 'Markup', 'Paint strokes on the region (foreground) and around it (background: Shift, right button or the Background toggle)'],
   ['heavy_lasso', 'Heavy lasso', 'Trace the boundary with one thick closed stroke'],
+  ['segment', 'Segments', 'Hover to preview the surface segment under the cursor, click to select it (Shift: add, Alt: subtract)'],
   ['point', 'Point', 'Click a surface point: a point part'],
 ];
 const MODES = [
@@ -34,7 +35,8 @@ export class SelectTools {
   /**
    * @param {{setTool: (t: string|null) => void, setMode: (m: string) => void,
    *   setBackground: (on: boolean) => void, setBrush: (px: number) => void, undo: Function,
-   *   confirm: Function, cancel: Function, editRegion: Function}} actions
+   *   confirm: Function, cancel: Function, editRegion: Function,
+   *   setScale: (scale: number) => void}} actions
    * @param {{brush: number}} initial
    */
   constructor(actions, initial) {
@@ -87,6 +89,21 @@ export class SelectTools {
     });
     brush.append(this.brush, ' px');
     this.brushLabel = brush;
+    // The segments' scale: 0 (finest) on the left, the coarsest on the right.
+    const scale = document.createElement('label');
+    scale.className = 'select-scale';
+    scale.textContent = 'Size ';
+    this.scale = document.createElement('input');
+    this.scale.type = 'range';
+    this.scale.min = '0';
+    this.scale.max = '0';
+    this.scale.step = '1';
+    this.scale.setAttribute('aria-label', 'Segment size: finer to the left, coarser to the right');
+    this.scale.addEventListener('input', () => actions.setScale(Number(this.scale.value)));
+    this.scaleCount = document.createElement('span');
+    this.scaleCount.className = 'select-scale-count';
+    scale.append(this.scale, this.scaleCount);
+    this.scaleLabel = scale;
     this.undo = button('Undo', 'Back to the previous selection', () => actions.undo());
     this.undo.dataset.action = 'undo';
     this.confirm = button('Confirm', 'Make the selection a part', () => actions.confirm(), 'select-confirm');
@@ -102,13 +119,13 @@ export class SelectTools {
     this.error.className = 'select-error';
     this.error.setAttribute('role', 'alert');
     this.error.hidden = true;
-    this.root.append(label, tools, modes, this.background, brush, this.undo, this.confirm, this.cancel, this.edit, this.status, this.error);
+    this.root.append(label, tools, modes, this.background, brush, scale, this.undo, this.confirm, this.cancel, this.edit, this.status, this.error);
   }
 
   /**
    * @param {{tool: string|null, mode: string, background: boolean, busy: boolean,
    *   drafts: number, draft: object|null, editing: number|null, openPart: number|null,
-   *   hint: string}} s
+   *   hint: string, segments: {scale: number|null, scales: number, count: number}}} s
    */
   render(s) {
     for (const [id, b] of this.tools) {
@@ -123,6 +140,13 @@ export class SelectTools {
     toggle(this.background, s.background);
     this.background.hidden = s.tool !== 'markup';
     this.brushLabel.hidden = s.tool !== 'markup' && s.tool !== 'heavy_lasso';
+    const seg = s.segments;
+    this.scaleLabel.hidden = s.tool !== 'segment' || !seg || seg.scale === null;
+    if (seg && seg.scale !== null) {
+      this.scale.max = String(Math.max(0, seg.scales - 1));
+      if (document.activeElement !== this.scale) this.scale.value = String(seg.scale);
+      this.scaleCount.textContent = ` ${seg.count.toLocaleString()} segments`;
+    }
     this.undo.disabled = s.busy || s.drafts === 0;
     this.confirm.disabled = s.busy || s.draft === null;
     this.cancel.disabled = s.busy || (s.drafts === 0 && s.tool === null && s.editing === null);

@@ -120,7 +120,10 @@ class Viewer {
       onEvict: (node) => {
         this.view.removePatch(node);
         this.store.removePatch(node);
-        if (this.selection) this.selection.highlight.removePatch(node);
+        if (this.selection) {
+          this.selection.highlight.removePatch(node);
+          this.selection.segments.removePatch(node);
+        }
       },
       onChange: () => this.requestFrame(),
     });
@@ -299,6 +302,7 @@ class Viewer {
         if (this.panel.partId === id) this.panel.open(id, this.store);
       },
       partTitle: (id) => this.store.title(id),
+      pick: (x, y) => pick(this.view, x, y),
     });
   }
 
@@ -337,7 +341,10 @@ class Viewer {
   patchLoaded(node, patch) {
     this.view.addPatch(node, patch);
     this.store.addPatch(node, patch);
-    if (this.selection) this.selection.highlight.addPatch(node, patch);
+    if (this.selection) {
+      this.selection.highlight.addPatch(node, patch);
+      this.selection.segments.addPatch(node, patch);
+    }
     this.markNode(node);
     this.layoutDirty = true;
     this.requestFrame();
@@ -508,12 +515,18 @@ class Viewer {
     const had = mesh.userData.marked;
     // A selection draft takes the selected part's tint (editing shows the draft, not the part).
     const drafting = this.selection !== null && this.selection.hasDraft();
-    if (!had && this.hovered === null && this.selected === null && !drafting) return;
+    // The segment previewed under the cursor (segment tool) takes the hover tint.
+    const segment = this.selection !== null ? this.selection.segments.verticesIn(node) : null;
+    if (!had && this.hovered === null && this.selected === null && !drafting && !segment) return;
     marks.fill(0);
     let any = false;
     const draft = drafting ? this.selection.highlight.verticesIn(node) : null;
     if (draft) {
       for (const v of draft) marks[v * 2 + 1] = 1;
+      any = true;
+    }
+    if (segment) {
+      for (const v of segment) marks[v * 2] = 1;
       any = true;
     }
     for (const [id, channel] of [

@@ -8,7 +8,8 @@ const ndc = new THREE.Vector2();
 
 /**
  * The nearest surface hit at client coordinates (x, y), or null.
- * @returns {{point: THREE.Vector3, distance: number, node: number, ids: number[], normal: THREE.Vector3|null}|null}
+ * @returns {{point: THREE.Vector3, distance: number, node: number, ids: number[], vertex: number|null,
+ *   normal: THREE.Vector3|null}|null} `vertex`: the original id of the corner nearest to the hit
  */
 export function pick(view, clientX, clientY) {
   const rect = view.canvas.getBoundingClientRect();
@@ -25,8 +26,27 @@ export function pick(view, clientX, clientY) {
     distance: h.distance,
     node: h.object.userData.node,
     ids: face ? [ids[face.a], ids[face.b], ids[face.c]] : [],
+    vertex: face ? nearestCorner(h, ids) : null,
     normal: face ? face.normal.clone() : null,
   };
+}
+
+const corner = new THREE.Vector3();
+
+/** The original id of the hit triangle's corner nearest to the hit point. */
+function nearestCorner(hit, ids) {
+  const pos = hit.object.geometry.getAttribute('position');
+  let best = null;
+  let bestD = Infinity;
+  for (const v of [hit.face.a, hit.face.b, hit.face.c]) {
+    corner.fromBufferAttribute(pos, v).applyMatrix4(hit.object.matrixWorld);
+    const d = corner.distanceToSquared(hit.point);
+    if (d < bestD) {
+      bestD = d;
+      best = ids[v];
+    }
+  }
+  return best;
 }
 
 /** Distance along the ray to the first surface between the camera and `point` (occlusion). */
