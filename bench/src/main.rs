@@ -10,6 +10,7 @@ mod nexus;
 mod render;
 mod search;
 mod select;
+mod simplify;
 mod untar;
 
 use std::path::PathBuf;
@@ -48,6 +49,9 @@ enum Command {
     /// The selection tools (heavy lasso, markup, lasso) through the real server against the
     /// Princeton segmentation benchmark: error vs ground truth and latency per tool.
     Select(select::Args),
+    /// Quadric collapses against the mesh-segmentation paper's segment-driven simplification
+    /// on real scans: distance at equal triangles, triangles at equal distance.
+    Simplify(simplify::Args),
 }
 
 /// The data directory.
@@ -105,5 +109,6 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             tokio::task::spawn_blocking(move || render::run(&model, out_dir.as_deref())).await?
         }
         Command::Select(args) => tokio::task::spawn_blocking(move || select::run(args)).await?,
+        Command::Simplify(args) => tokio::task::spawn_blocking(move || simplify::run(args)).await?,
     }
 }

@@ -16,6 +16,7 @@ use meshwiki::store::jobs::{self, JobKind, JobOptions, NewJob};
 use meshwiki::store::models::NewModel;
 use meshwiki::store::users::{self, Role, User};
 use meshwiki::terminal::{Bar, check_input, print_summary};
+use meshwiki_engine::lod::segsimplify::Simplifier;
 
 use super::DataDirArgs;
 
@@ -39,6 +40,11 @@ pub struct Args {
     /// Build threads (default: all cores).
     #[arg(long)]
     pub threads: Option<u32>,
+    /// How the levels are simplified: `quadric` (edge collapses, the default) or `segments`
+    /// (the mesh-segmentation paper's segment-driven vertex removal; `meshwiki-bench
+    /// simplify` compares the two).
+    #[arg(long, default_value = "quadric")]
+    pub simplifier: Simplifier,
     /// Account that owns the model (default: the first admin).
     #[arg(long)]
     pub owner: Option<String>,
@@ -103,6 +109,7 @@ async fn import(db: &Db, settings: Settings, args: &Args, bytes: u64) -> anyhow:
             memory_budget: Some(args.memory),
             max_patch_triangles: Some(args.max_patch_triangles),
             threads: args.threads,
+            simplifier: (args.simplifier != Simplifier::Quadric).then_some(args.simplifier),
             ..JobOptions::default()
         },
         running_pid: Some(std::process::id() as i64),

@@ -688,6 +688,7 @@ impl Jobs {
                 .unwrap_or(b.memory_budget)
                 .min(usize::MAX as u64) as usize,
             threads: job.options.threads.map(|t| t as usize).or(b.threads),
+            simplifier: job.options.simplifier.unwrap_or_default(),
             ..BuildOptions::default()
         }
     }

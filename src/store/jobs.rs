@@ -5,6 +5,7 @@
 //! the image repository of a ready model (`store::lumigraph`): it moves that repository's
 //! status instead, and never the model's.
 
+use meshwiki_engine::lod::segsimplify::Simplifier;
 use serde::{Deserialize, Serialize};
 use sqlx::Row;
 use sqlx::sqlite::SqliteRow;
@@ -95,6 +96,11 @@ pub struct JobOptions {
     /// Worker threads (default: the server's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub threads: Option<u32>,
+    /// How the hierarchy's levels are simplified (default `quadric`; `segments`: the
+    /// mesh-segmentation paper's segment-driven vertex removal, measured by
+    /// `meshwiki-bench simplify`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simplifier: Option<Simplifier>,
     /// Triangles of the generated relief (demo jobs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub triangles: Option<u64>,

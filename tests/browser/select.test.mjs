@@ -433,9 +433,21 @@ describe('the selection tools on the real server', () => {
       s = await poll(page, () => window.meshwikiViewer.selection(), (s) => s.segment && s.segment.scale === finer, 10_000);
       assert.ok(s.segment.size <= first.seg.size, 'a finer segment is larger than the coarser one holding it');
     }
+
+    // Confirmed: a region part holding exactly the two segments.
+    const draftSet = await vertexSet(`/api/v1/selections/${s.drafts[1].id}/vertices`);
+    await tools.locator('button[data-action=confirm]').click();
+    const partId = Number(await poll(page, () => document.querySelector('.select-assign:not([hidden])')?.dataset.partId, (v) => Boolean(v), 20_000));
+    const part = await server.api.get(`/api/v1/parts/${partId}`);
+    assert.equal(part.kind, 'region');
+    assert.equal(part.vertex_count, first.seg.size + second.seg.size);
+    const partSet = await vertexSet(`/api/v1/parts/${partId}/vertices`);
+    assert.equal(partSet.size, draftSet.size);
+    assert.ok([...draftSet.values()].every((v) => partSet.has(v)), 'the part is not the confirmed segments');
+    const revisions = await server.api.get(`/api/v1/parts/${partId}/revisions`);
+    assert.equal(revisions[0].tool, 'segment');
     await page.keyboard.press('Escape');
-    s = await waitSelection(page, (s) => s.tool === null);
-    assert.equal(s.drafts.length, 0);
+    s = await waitSelection(page, (s) => s.drafts.length === 0 && s.assigning === null);
     await page.close();
   });
 

@@ -277,6 +277,47 @@ impl Api {
             .with_context(|| format!("GET {path}: not a serialised RoaringBitmap"))
     }
 
+    /// The model's segment counts per scale, finest first, and the suggested scale
+    /// (`GET /api/v1/models/{id}/segments`).
+    pub fn segment_scales(&self, model: i64) -> Result<(Vec<u32>, usize)> {
+        let path = format!("/api/v1/models/{model}/segments");
+        let r = self.send("GET", &path, None, Vec::new())?;
+        if r.status != 200 {
+            bail!("GET {path}: {} {}", r.status, r.text());
+        }
+        let v: Value = serde_json::from_slice(&r.body).context("segments answer")?;
+        let counts = v["scales"]
+            .as_array()
+            .context("no scales")?
+            .iter()
+            .map(|s| s["segments"].as_u64().map(|n| n as u32))
+            .collect::<Option<Vec<u32>>>()
+            .context("a scale without a count")?;
+        let suggested = v["suggested_scale"]
+            .as_u64()
+            .context("no suggested scale")? as usize;
+        Ok((counts, suggested))
+    }
+
+    /// The segment at `scale` holding original vertex `vertex` (`None`: it is in none), from
+    /// `GET /api/v1/models/{id}/segments/{scale}/vertices?vertex=V`.
+    pub fn segment_of(
+        &self,
+        model: i64,
+        scale: usize,
+        vertex: u32,
+    ) -> Result<Option<RoaringBitmap>> {
+        let path = format!("/api/v1/models/{model}/segments/{scale}/vertices?vertex={vertex}");
+        let r = self.send("GET", &path, None, Vec::new())?;
+        match r.status {
+            200 => RoaringBitmap::deserialize_from(&r.body[..])
+                .map(Some)
+                .with_context(|| format!("GET {path}: not a serialised RoaringBitmap")),
+            404 => Ok(None),
+            s => bail!("GET {path}: {s} {}", r.text()),
+        }
+    }
+
     /// Discards a draft (`DELETE /api/v1/selections/{draft}`).
     pub fn discard(&self, draft: &str) -> Result<()> {
         let path = format!("/api/v1/selections/{draft}");

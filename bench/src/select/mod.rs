@@ -20,6 +20,7 @@ mod process;
 mod psb;
 mod raster;
 mod strokes;
+mod suggested;
 mod truth;
 
 use std::path::{Path, PathBuf};
@@ -316,6 +317,7 @@ pub fn run(args: Args) -> Result<()> {
             "seconds": {"evaluate": eval_s},
         }));
     }
+    let suggested = suggested_regions(&api, &models)?;
     drop(running);
     if args.sweep {
         println!("worst setting per tool (by mean error):");
@@ -347,6 +349,7 @@ pub fn run(args: Args) -> Result<()> {
                           "min_region_share": MIN_REGION_SHARE,
                           "min_pixels": eval::MIN_PIXELS},
             "runs": runs,
+            "suggested_regions": suggested,
             "seconds": {"import": import_s, "total": started.elapsed().as_secs_f64()},
         });
         write_json(out, &doc)?;
@@ -409,6 +412,69 @@ fn evaluate(
     }
     regions_bar.finish_and_clear();
     Ok((results, skipped, eval_started.elapsed().as_secs_f64()))
+}
+
+/// The Segments tool on every region ([`suggested`]): prints, per scale around the
+/// suggested one and for the best scale of each region, the error and clicks; returns the
+/// figures as JSON.
+fn suggested_regions(api: &Api, models: &[Model]) -> Result<serde_json::Value> {
+    let total: usize = models.iter().map(|m| m.seg.regions.len()).sum();
+    let regions_bar = bar(total as u64, "segments");
+    let started = Instant::now();
+    let mut results = Vec::new();
+    for m in models {
+        let (counts, scale) = api.segment_scales(m.model_id)?;
+        for region in &m.seg.regions {
+            regions_bar.set_message(format!("{} segment {}", m.psb_id, region.segment));
+            results.push(suggested::region(
+                api, m.model_id, m.psb_id, region, &counts, scale,
+            )?);
+            regions_bar.inc(1);
+        }
+    }
+    regions_bar.finish_and_clear();
+    println!(
+        "suggested regions: {} regions, a click on every segment mostly inside the region \
+         (the Segments tool); error = |clicked Δ region| / |region| over all its vertices, \
+         hidden side included; {:.1} s",
+        results.len(),
+        started.elapsed().as_secs_f64()
+    );
+    println!(
+        "  {:<18} {:>7} {:>9} {:>9} {:>9} {:>8} {:>10} {:>10}",
+        "scale", "regions", "mean err", "p50 err", "p90 err", "clicks", "previews", "segments"
+    );
+    let row = |label: &str, picked: Vec<suggested::AtScale>| {
+        let errors: Vec<f64> = picked.iter().map(|a| a.error).collect();
+        let clicks: Vec<f64> = picked.iter().map(|a| a.clicks as f64).collect();
+        let looked: Vec<f64> = picked.iter().map(|a| a.looked_at as f64).collect();
+        let segments: Vec<f64> = picked.iter().map(|a| a.segments as f64).collect();
+        println!(
+            "  {label:<18} {:>7} {:>8.2}% {:>8.2}% {:>8.2}% {:>8.1} {:>10.1} {:>10.0}",
+            picked.len(),
+            mean(&errors) * 100.0,
+            percentile(&errors, 0.5) * 100.0,
+            percentile(&errors, 0.9) * 100.0,
+            mean(&clicks),
+            mean(&looked),
+            mean(&segments)
+        );
+        json!({"regions": picked.len(), "mean_error": mean(&errors),
+               "p50_error": percentile(&errors, 0.5), "p90_error": percentile(&errors, 0.9),
+               "mean_clicks": mean(&clicks), "mean_previews": mean(&looked)})
+    };
+    let mut summary = serde_json::Map::new();
+    for (k, offset) in suggested::OFFSETS.enumerate() {
+        let label = match offset {
+            0 => "suggested".to_string(),
+            o => format!("suggested {o:+}"),
+        };
+        let picked: Vec<_> = results.iter().filter_map(|r| r.scales[k]).collect();
+        summary.insert(label.clone(), row(&label, picked));
+    }
+    let best: Vec<_> = results.iter().filter_map(|r| r.best()).collect();
+    summary.insert("best per region".into(), row("best per region", best));
+    Ok(json!({"summary": summary, "regions": results}))
 }
 
 /// Writes `doc` to a temporary name beside `path`, then renames it.

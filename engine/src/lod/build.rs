@@ -23,6 +23,7 @@ use super::format::{
 use super::grouping::{PatchOutline, group_patches};
 use super::ingest::{Ingest, Ingested};
 use super::patch::{BuildPatch, ScratchFile, edge_ends};
+use super::segsimplify::Simplifier;
 use super::simplify::{merge, simplify_group, split_tracked};
 use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink, SourceTexture, TexturedFace};
 use crate::progress::Progress;
@@ -53,6 +54,9 @@ pub struct BuildOptions {
     pub group_size: usize,
     /// JPEG quality (1–100) of the patches' texture atlases (textured scans).
     pub texture_quality: u8,
+    /// How each group step simplifies (quadric collapses by default; see
+    /// `meshwiki-bench simplify` for the comparison with the segment-driven method).
+    pub simplifier: Simplifier,
 }
 
 impl Default for BuildOptions {
@@ -65,6 +69,7 @@ impl Default for BuildOptions {
             zstd_level: 19,
             group_size: 8,
             texture_quality: 85,
+            simplifier: Simplifier::Quadric,
         }
     }
 }
@@ -716,7 +721,12 @@ impl<'a> Builder<'a> {
                     };
                     let shared_outside =
                         |id: u32| inside.get(&id).is_some_and(|&c| uses[id as usize] > c);
-                    let outcome = match simplify_group(&merged, &shared_outside, max) {
+                    let outcome = match simplify_group(
+                        &merged,
+                        &shared_outside,
+                        max,
+                        this.options.simplifier,
+                    ) {
                         None => None,
                         Some(step) => {
                             // Triangle inequality: the unquantised products are within

@@ -18,6 +18,7 @@ mod ingest;
 pub mod nearest;
 pub mod partition;
 pub mod patch;
+pub mod segsimplify;
 pub mod simplify;
 pub mod sparse;
 mod spill;

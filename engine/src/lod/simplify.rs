@@ -18,6 +18,7 @@
 use super::hausdorff::simplification_distance;
 use super::partition::{Triangles, partition};
 use super::patch::{BuildPatch, EdgeUses, edge_key};
+use super::segsimplify::{self, SegmentParams, Simplifier};
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 use rustc_hash::FxHashMap as HashMap;
 
@@ -80,6 +81,7 @@ pub fn simplify_group(
     merged: &Merged,
     shared_outside: &dyn Fn(u32) -> bool,
     max_triangles: usize,
+    simplifier: Simplifier,
 ) -> Option<GroupStep> {
     let mesh = &merged.patch;
     let tri_count = mesh.triangle_count();
@@ -111,6 +113,16 @@ pub fn simplify_group(
         })
         .collect();
     let run = |locks: &[SimplifyVertex]| {
+        if simplifier == Simplifier::Segments {
+            let locked: Vec<bool> = locks.iter().map(|l| *l == SimplifyVertex::Lock).collect();
+            return segsimplify::simplify(
+                &positions,
+                &mesh.indices,
+                &locked,
+                target,
+                &SegmentParams::default(),
+            );
+        }
         // No `Prune`: it removes small components even through locked vertices, which would
         // tear a group from its neighbours.
         let options = SimplifyOptions::ErrorAbsolute;
@@ -558,7 +570,7 @@ mod tests {
         let a = sheet(30, 0, 0.0);
         let merged = merge(&[&a]);
         let border: std::collections::HashSet<u64> = a.border_edges().into_iter().collect();
-        let step = simplify_group(&merged, &|_| false, 4096).expect("reduces");
+        let step = simplify_group(&merged, &|_| false, 4096, Simplifier::Quadric).expect("reduces");
         let product_tris: usize = step.products.iter().map(|p| p.triangle_count()).sum();
         assert!(product_tris <= a.triangle_count() * 6 / 10);
         let mut out_border: Vec<u64> = {
