@@ -401,6 +401,100 @@ fn markup_and_modes_across_two_views() {
     assert!(base.vertices.is_subset(&back.vertices));
 }
 
+/// On a view large enough, markup runs coarse to fine (`select::multilevel`): only a window
+/// around the selection is rendered at full resolution, and the vertices it selects are those
+/// the one-level cut of the whole view selects, up to the band's refinement.
+#[test]
+fn markup_coarse_to_fine_selects_what_the_one_level_cut_selects() {
+    use meshwiki_engine::select::{Input, multilevel, select_on_view};
+    let Some(r) = renderer() else { return };
+    let p = planes();
+    let (w, h) = (640u32, 480u32);
+    let c = camera(Vec3::new(0.1, -0.05, 4.0), w, h);
+    assert!(multilevel::applies(&c));
+    // A short foreground stroke on the front plane; background strokes on the back plane
+    // around it, a few pixels inside its outline.
+    let at = |x: f32, y: f32, z: f32| {
+        let (px, py, _) = c.project(Vec3::new(x, y, z)).expect("in view");
+        (px as i32, py as i32)
+    };
+    let mut m = StrokeMask::empty(w, h).unwrap();
+    let mut line = |from: (i32, i32), to: (i32, i32), label: u8| {
+        let n = (to.0 - from.0).abs().max((to.1 - from.1).abs()).max(1);
+        for k in 0..=n {
+            let x = from.0 + (to.0 - from.0) * k / n;
+            let y = from.1 + (to.1 - from.1) * k / n;
+            for d in -1..=1 {
+                m.labels[((y + d) as u32 * w + x as u32) as usize] = label;
+            }
+        }
+    };
+    let (cx, cy) = ((FX0 + FX1) / 2.0, (FY0 + FY1) / 2.0);
+    line(
+        at(cx - 0.1, cy, FRONT_Z),
+        at(cx + 0.1, cy, FRONT_Z),
+        mask::FOREGROUND,
+    );
+    let corners = [(-0.9, -0.9), (0.9, -0.9), (0.9, 0.9), (-0.9, 0.9)];
+    for k in 0..4 {
+        let (a, b) = (corners[k], corners[(k + 1) % 4]);
+        line(at(a.0, a.1, 0.0), at(b.0, b.1, 0.0), mask::BACKGROUND);
+    }
+    let params = EnergyParams::default();
+    let input = Input::Strokes {
+        tool: Tool::Markup,
+        mask: &m,
+        params: &params,
+    };
+    let two_level = select_on_view(r, &p.model, &c, input, 1.0, None).expect("select");
+    let front: RoaringBitmap = (p.back_vertices..p.mesh.positions.len() as u32).collect();
+    let found = two_level.backprojection.vertices.intersection_len(&front);
+    assert!(
+        found as f64 > front.len() as f64 * 0.97,
+        "{found} of {} front vertices",
+        front.len()
+    );
+    let back = two_level.backprojection.vertices.len() - found;
+    assert!(back < 20, "{back} back vertices");
+
+    // The one-level cut of the whole view.
+    let frame = render(r, &p.model, &c);
+    let buffers = Buffers::from_frame(&frame).unwrap();
+    let one_level = select_vertices(p, &c, &buffers, Tool::Markup, &m, None);
+    let a = &two_level.backprojection.vertices;
+    let b = &one_level.vertices;
+    let differ = a.symmetric_difference_len(b);
+    assert!(
+        differ * 100 <= a.union_len(b),
+        "{differ} vertices differ of {}",
+        a.union_len(b)
+    );
+
+    // Only the window around the selection was drawn at full resolution.
+    let (fine, _, _) = multilevel::markup_on_view(
+        r,
+        &p.model,
+        &c,
+        &m,
+        &params,
+        &meshwiki_engine::render::RenderOptions {
+            cut: meshwiki_engine::render::Cut::View {
+                pixel_error: 1.0,
+                culling: meshwiki_engine::lod::Culling::ALL,
+            },
+            outputs: meshwiki_engine::render::Outputs::ALL,
+            ..Default::default()
+        },
+    )
+    .expect("coarse to fine");
+    let drawn = Buffers::from_frame(&fine).unwrap().covered_count();
+    assert!(
+        drawn * 2 < buffers.covered_count(),
+        "{drawn} pixels drawn at full resolution of {} covered",
+        buffers.covered_count()
+    );
+}
+
 #[test]
 fn a_click_picks_the_surface_point_and_its_vertex() {
     let Some(r) = renderer() else { return };

@@ -68,6 +68,22 @@ pub fn graph_cut(
     params: &EnergyParams,
     color_cue: bool,
 ) -> Result<(Vec<bool>, CutStats), SelectError> {
+    let models = (
+        SeedModel::fit(buffers, &seeds.fg_samples, params.clusters),
+        SeedModel::fit(buffers, &seeds.bg_samples, params.clusters),
+    );
+    graph_cut_with(buffers, seeds, params, color_cue, models)
+}
+
+/// [`graph_cut`] with the foreground and background seed models given (fitted elsewhere:
+/// the coarse level of [`super::multilevel`] fits them on the strokes of the whole view).
+pub fn graph_cut_with(
+    buffers: &Buffers<'_>,
+    seeds: &Seeds,
+    params: &EnergyParams,
+    color_cue: bool,
+    (fg, bg): (SeedModel, SeedModel),
+) -> Result<(Vec<bool>, CutStats), SelectError> {
     params.validate()?;
     let t0 = Instant::now();
     let (w, h) = (buffers.width as usize, buffers.height as usize);
@@ -90,12 +106,7 @@ pub fn graph_cut(
     let global = |lx: usize, ly: usize| (y0 + ly) * w + x0 + lx;
 
     let smooth = Smoothness::estimate(buffers, params, color_cue);
-    let data = DataTerm::new(
-        SeedModel::fit(buffers, &seeds.fg_samples, params.clusters),
-        SeedModel::fit(buffers, &seeds.bg_samples, params.clusters),
-        params,
-        color_cue,
-    );
+    let data = DataTerm::new(fg, bg, params, color_cue);
     let mut source = vec![0f32; m];
     let mut sink = vec![0f32; m];
     let mut right = vec![0f32; m];

@@ -11,6 +11,7 @@
 //! - [`energy`]: the data term (eq. 2–3) and the smoothness term (eq. 4).
 //! - [`graph_cut`]: the graph over covered pixels, 8-connected, solved by Boykov–Kolmogorov max-flow
 //!   ([`maxflow_grid`]) (eq. 1).
+//! - [`multilevel`]: markup coarse to fine on large views (a banded multilevel graph cut).
 //! - [`pipeline`]: one call from strokes and buffers to selected pixels, per tool.
 //! - [`backproject`]: selected pixels to original vertex ids through the id and depth buffers
 //!   and the patch DAG down to the leaves (§4.1.2); occluded surfaces are never selected.
@@ -26,6 +27,7 @@ pub mod mask;
 pub mod maxflow;
 pub mod maxflow_grid;
 pub mod modes;
+pub mod multilevel;
 pub mod on_view;
 pub mod pipeline;
 pub mod point;

@@ -14,7 +14,8 @@ use super::buffers::Buffers;
 use super::energy::EnergyParams;
 use super::graph_cut::CutStats;
 use super::mask::{self, StrokeMask};
-use super::pipeline::{Tool, select_pixels};
+use super::multilevel;
+use super::pipeline::{PixelSelection, Tool, select_pixels};
 use super::point::{self, PickedPoint};
 use super::suggest::select_segment;
 use crate::camera::Camera;
@@ -89,7 +90,8 @@ const CLICK_RADIUS: u32 = 4;
 /// lasso selects only inside its outline and the heavy lasso's cut only decides its band, so
 /// both need only their strokes' bounding box (plus [`WINDOW_MARGIN`]); a click needs its
 /// pixel. Markup's cut decides every pixel of the view (a short stroke may claim a part much
-/// larger than the strokes' box): it reads the whole view. Inside the
+/// larger than the strokes' box): it reads the whole view, coarse to fine on views of at
+/// least [`multilevel::MIN_PIXELS`] ([`multilevel`]). Inside the
 /// window the buffers are those of the whole view (the same cut, drawn with an off-centre
 /// crop of the same projection), so the selection is the same.
 fn window(input: &Input<'_>, camera: &Camera) -> Option<[u32; 4]> {
@@ -149,6 +151,20 @@ pub fn select_on_view(
         window: window(&input, camera),
         ..RenderOptions::default()
     };
+    if let Input::Strokes {
+        tool: Tool::Markup,
+        mask,
+        params,
+    } = input
+        && multilevel::applies(camera)
+    {
+        let t = Instant::now();
+        let (frame, sel, render_ms) =
+            multilevel::markup_on_view(renderer, model, camera, mask, params, &options)?;
+        let buffers = Buffers::from_frame(&frame)?;
+        let cut_ms = t.elapsed().as_secs_f64() * 1e3 - render_ms;
+        return strokes_result(model, camera, &buffers, sel, base, render_ms, cut_ms);
+    }
     let frame = renderer
         .render(model, camera, &options, &[])?
         .embed(camera.width, camera.height);
@@ -210,25 +226,38 @@ pub fn select_on_view(
             let color_cue = model.lod().has_colors();
             let sel = select_pixels(tool, mask, &buffers, params, color_cue, model.segments())?;
             let cut_ms = t.elapsed().as_secs_f64() * 1e3;
-            let backprojection = back_project(
-                model.lod(),
-                camera,
-                &buffers,
-                &sel.selected,
-                base,
-                &BackProjectOptions::default(),
-            )?;
-            Ok(ViewSelection {
-                mask_png: mask::selection_png(w, h, &sel.selected),
-                selected_pixels: sel.count,
-                cut: sel.cut,
-                backprojection,
-                picked: None,
-                segment: None,
-                render_ms,
-                cut_ms,
-                seeds_ms: sel.seeds_ms,
-            })
+            strokes_result(model, camera, &buffers, sel, base, render_ms, cut_ms)
         }
     }
+}
+
+/// The result of a stroke tool: its selected pixels back-projected.
+fn strokes_result(
+    model: &RenderModel,
+    camera: &Camera,
+    buffers: &Buffers<'_>,
+    sel: PixelSelection,
+    base: Option<&RoaringBitmap>,
+    render_ms: f64,
+    cut_ms: f64,
+) -> Result<ViewSelection, ViewSelectError> {
+    let backprojection = back_project(
+        model.lod(),
+        camera,
+        buffers,
+        &sel.selected,
+        base,
+        &BackProjectOptions::default(),
+    )?;
+    Ok(ViewSelection {
+        mask_png: mask::selection_png(camera.width, camera.height, &sel.selected),
+        selected_pixels: sel.count,
+        cut: sel.cut,
+        backprojection,
+        picked: None,
+        segment: None,
+        render_ms,
+        cut_ms,
+        seeds_ms: sel.seeds_ms,
+    })
 }

@@ -95,94 +95,125 @@ pub struct SegmentPrior {
     pub region: Vec<u64>,
 }
 
-/// The largest segments holding strokes of one side only, from the seeds' foreground and
-/// background pixels.
-pub fn stroke_segments(view: &ViewSegments, seeds: &Seeds) -> SegmentPrior {
-    let n = view.local.len();
-    let scales = view.ladders.first().map_or(0, Vec::len);
-    // Stroke pixels per (scale, segment): (foreground, background).
-    let mut count: FxHashMap<(usize, u32), (u32, u32)> = FxHashMap::default();
-    let mut local_count: Vec<(u32, u32)> = vec![(0, 0); view.ladders.len()];
-    for i in 0..n.min(seeds.role.len()) {
-        let l = view.local[i];
-        if l == NONE {
-            continue;
-        }
-        match seeds.role[i] {
-            FG => local_count[l as usize].0 += 1,
-            BG => local_count[l as usize].1 += 1,
-            _ => {}
-        }
-    }
-    for (l, &(f, b)) in local_count.iter().enumerate() {
-        if f == 0 && b == 0 {
-            continue;
-        }
-        for (s, &seg) in view.ladders[l].iter().enumerate() {
-            let c = count.entry((s, seg)).or_default();
-            c.0 += f;
-            c.1 += b;
-        }
-    }
-    let key = |s: usize, seg: u32| (s as u64) << 32 | seg as u64;
-    // The segments the strokes claim: from each fine segment with strokes, up through the
-    // segments of its side only, the one with the strongest boundary (the larger on a tie).
-    let mut claimed: FxHashMap<u64, i8> = FxHashMap::default();
-    for (l, ladder) in view.ladders.iter().enumerate() {
-        let (f, b) = local_count[l];
-        if (f > 0) == (b > 0) {
-            continue;
-        }
-        let side: i8 = if f > 0 { 1 } else { -1 };
-        let mut best: Option<(f32, u64)> = None;
-        for (s, &seg) in ladder.iter().enumerate().take(scales) {
-            if seg == NONE {
-                break;
+/// What the strokes claim (the first half of [`stroke_segments`]): per `scale << 32 | segment`
+/// key, the side of the segments the strokes claim, and the segments holding any stroke.
+/// Keys name segments of the model, not pixels, so claims made on one rendering of a view
+/// hold on another of the same view (the coarse and fine levels of
+/// [`super::multilevel`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StrokeClaims {
+    claimed: FxHashMap<u64, i8>,
+    touched: rustc_hash::FxHashSet<u64>,
+}
+
+fn key(s: usize, seg: u32) -> u64 {
+    (s as u64) << 32 | seg as u64
+}
+
+impl StrokeClaims {
+    /// The segments claimed by the seeds' foreground and background pixels: from each fine
+    /// segment with strokes, up through the segments of its side only, the one with the
+    /// strongest boundary (the larger on a tie).
+    pub fn of(view: &ViewSegments, seeds: &Seeds) -> StrokeClaims {
+        let n = view.local.len();
+        let scales = view.ladders.first().map_or(0, Vec::len);
+        // Stroke pixels per (scale, segment): (foreground, background).
+        let mut count: FxHashMap<u64, (u32, u32)> = FxHashMap::default();
+        let mut local_count: Vec<(u32, u32)> = vec![(0, 0); view.ladders.len()];
+        for i in 0..n.min(seeds.role.len()) {
+            let l = view.local[i];
+            if l == NONE {
+                continue;
             }
-            let (f, b) = count.get(&(s, seg)).copied().unwrap_or((0, 0));
-            if f > 0 && b > 0 {
-                break;
-            }
-            let strength = view.strengths[l].get(s).copied().unwrap_or(f32::INFINITY);
-            if best.is_none_or(|(bs, _)| strength >= bs) {
-                best = Some((strength, key(s, seg)));
+            match seeds.role[i] {
+                FG => local_count[l as usize].0 += 1,
+                BG => local_count[l as usize].1 += 1,
+                _ => {}
             }
         }
-        if let Some((_, k)) = best {
-            claimed.insert(k, side);
+        for (l, &(f, b)) in local_count.iter().enumerate() {
+            if f == 0 && b == 0 {
+                continue;
+            }
+            for (s, &seg) in view.ladders[l].iter().enumerate() {
+                let c = count.entry(key(s, seg)).or_default();
+                c.0 += f;
+                c.1 += b;
+            }
         }
-    }
-    // Per local fine segment: its claimed segment, or else its largest segment without
-    // strokes (for the boundaries).
-    let decided: Vec<(i8, u64)> = view
-        .ladders
-        .iter()
-        .map(|ladder| {
-            let mut free = u64::MAX;
+        let mut claimed: FxHashMap<u64, i8> = FxHashMap::default();
+        for (l, ladder) in view.ladders.iter().enumerate() {
+            let (f, b) = local_count[l];
+            if (f > 0) == (b > 0) {
+                continue;
+            }
+            let side: i8 = if f > 0 { 1 } else { -1 };
+            let mut best: Option<(f32, u64)> = None;
             for (s, &seg) in ladder.iter().enumerate().take(scales) {
                 if seg == NONE {
                     break;
                 }
-                if let Some(&side) = claimed.get(&key(s, seg)) {
-                    return (side, key(s, seg));
+                let (f, b) = count.get(&key(s, seg)).copied().unwrap_or((0, 0));
+                if f > 0 && b > 0 {
+                    break;
                 }
-                if !count.contains_key(&(s, seg)) {
-                    free = key(s, seg);
+                let strength = view.strengths[l].get(s).copied().unwrap_or(f32::INFINITY);
+                if best.is_none_or(|(bs, _)| strength >= bs) {
+                    best = Some((strength, key(s, seg)));
                 }
             }
-            (0, free)
-        })
-        .collect();
-    let mut side = vec![0i8; n];
-    let mut region = vec![u64::MAX; n];
-    for i in 0..n {
-        let l = view.local[i];
-        if l == NONE || seeds.role.get(i) == Some(&OFF) {
-            continue;
+            if let Some((_, k)) = best {
+                claimed.insert(k, side);
+            }
         }
-        (side[i], region[i]) = decided[l as usize];
+        StrokeClaims {
+            claimed,
+            touched: count.into_keys().collect(),
+        }
     }
-    SegmentPrior { side, region }
+
+    /// The prior of `view`'s pixels (`role`: the seeds' roles, [`OFF`] pixels get none): per
+    /// local fine segment, its claimed segment, or else its largest segment without strokes
+    /// (for the boundaries).
+    pub fn prior(&self, view: &ViewSegments, role: &[u8]) -> SegmentPrior {
+        let n = view.local.len();
+        let scales = view.ladders.first().map_or(0, Vec::len);
+        let decided: Vec<(i8, u64)> = view
+            .ladders
+            .iter()
+            .map(|ladder| {
+                let mut free = u64::MAX;
+                for (s, &seg) in ladder.iter().enumerate().take(scales) {
+                    if seg == NONE {
+                        break;
+                    }
+                    if let Some(&side) = self.claimed.get(&key(s, seg)) {
+                        return (side, key(s, seg));
+                    }
+                    if !self.touched.contains(&key(s, seg)) {
+                        free = key(s, seg);
+                    }
+                }
+                (0, free)
+            })
+            .collect();
+        let mut side = vec![0i8; n];
+        let mut region = vec![u64::MAX; n];
+        for i in 0..n {
+            let l = view.local[i];
+            if l == NONE || role.get(i) == Some(&OFF) {
+                continue;
+            }
+            (side[i], region[i]) = decided[l as usize];
+        }
+        SegmentPrior { side, region }
+    }
+}
+
+/// The largest segments holding strokes of one side only, from the seeds' foreground and
+/// background pixels ([`StrokeClaims::of`], then [`StrokeClaims::prior`]).
+pub fn stroke_segments(view: &ViewSegments, seeds: &Seeds) -> SegmentPrior {
+    StrokeClaims::of(view, seeds).prior(view, &seeds.role)
 }
 
 #[cfg(test)]
