@@ -205,7 +205,14 @@ pub fn run(model: &Path, out_dir: Option<&Path>) -> Result<()> {
             .context("MESHWIKI_RENDER_CACHE")?
             .max(1 << 20);
     }
-    let gpu = GpuDevice::new(AdapterChoice::Software).context("opening the software adapter")?;
+    // The software adapter unless `MESHWIKI_RENDER_ADAPTER` asks for another (as the server).
+    let choice = match std::env::var("MESHWIKI_RENDER_ADAPTER") {
+        Ok(name) => AdapterChoice::parse(name.trim()).with_context(|| {
+            format!("MESHWIKI_RENDER_ADAPTER={name:?}: auto, software or hardware")
+        })?,
+        Err(_) => AdapterChoice::Software,
+    };
+    let gpu = GpuDevice::new(choice).with_context(|| format!("opening the {choice:?} adapter"))?;
     let renderer = Renderer::new(gpu.clone(), settings);
     let mut reference = bare::Bare::new(gpu).context("the bare-draw reference")?;
     let lod = model.lod();

@@ -217,6 +217,10 @@ impl Coarse {
         let (w, h) = (buffers.width as usize, buffers.height as usize);
         let dims = [w, h, self.width, self.height];
         let n = w * h;
+        // `coarse_of` split by axis: coarse row offset per row, coarse column per column.
+        let row: Vec<usize> = (0..h).map(|y| coarse_of(0, y, dims)).collect();
+        let col: Vec<usize> = (0..w).map(|x| coarse_of(x, 0, dims)).collect();
+        let coarse_of = |i: usize| row[i / w] + col[i % w];
         let mut role = vec![OFF; n];
         let (mut fg, mut bg) = (Vec::new(), Vec::new());
         for (i, r) in role.iter_mut().enumerate() {
@@ -233,7 +237,7 @@ impl Coarse {
                     BG
                 }
                 _ => {
-                    let c = coarse_of(i % w, i / w, dims);
+                    let c = coarse_of(i);
                     match (self.near_selected[c], self.near_unselected[c]) {
                         (true, true) => UNKNOWN,
                         (true, false) => FG,
@@ -242,11 +246,10 @@ impl Coarse {
                 }
             };
         }
-        let stroke_position = self.stroke_position.as_ref().map(|coarse| {
-            (0..n)
-                .map(|i| coarse[coarse_of(i % w, i / w, dims)])
-                .collect()
-        });
+        let stroke_position = self
+            .stroke_position
+            .as_ref()
+            .map(|coarse| (0..n).map(|i| coarse[coarse_of(i)]).collect());
         let mut s = Seeds {
             width: buffers.width,
             height: buffers.height,

@@ -163,7 +163,9 @@ impl StepCosts {
         }
     }
 
-    /// The eight steps out of pixel `i`: `(neighbour, cost)`, uncovered ones left out.
+    /// The eight steps out of pixel `i`: `(neighbour, cost)`, uncovered ones left out (the
+    /// plain form of the walk [`geodesic_from`] inlines; its test reference).
+    #[cfg(test)]
     fn steps(&self, i: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
         let (w, h) = (self.width, self.height);
         let (x, y) = ((i % w) as isize, (i / w) as isize);
@@ -203,17 +205,36 @@ pub fn geodesic_from(costs: &StepCosts, buffers: &Buffers<'_>, sources: &[u32]) 
             heap.push(0, s as u32);
         }
     }
+    // Index offsets of the forward steps. A forward step leaving the image is INFINITY (see
+    // `StepCosts::new`), so neither a forward step nor a backward one (the forward step of
+    // the pixel it leads from) can wrap around a row: only the index range is checked.
+    let w = costs.width as isize;
+    let offsets: [isize; 4] = FORWARD.map(|(dx, dy)| dy * w + dx);
+    let n = dist.len();
     while let Some((d, i)) = heap.pop() {
         let d = f32::from_bits(d);
         let i = i as usize;
         if d > dist[i] {
             continue;
         }
-        for (j, step) in costs.steps(i) {
+        let mut relax = |j: usize, step: f32| {
             let nd = d + step;
             if nd < dist[j] {
                 dist[j] = nd;
                 heap.push(nd.to_bits(), j as u32);
+            }
+        };
+        let forward = costs.forward[i];
+        for (k, &off) in offsets.iter().enumerate() {
+            if forward[k].is_finite() {
+                relax((i as isize + off) as usize, forward[k]);
+            }
+            let j = i as isize - off;
+            if j >= 0 && (j as usize) < n {
+                let step = costs.forward[j as usize][k];
+                if step.is_finite() {
+                    relax(j as usize, step);
+                }
             }
         }
     }
@@ -647,6 +668,66 @@ mod tests {
             }
         }
         assert!(binary.is_empty() && popped > 400);
+    }
+
+    /// The inlined walk of `geodesic_from` finds the distances of a plain Dijkstra over
+    /// `StepCosts::steps`, on a view with holes, creases and depth steps.
+    #[test]
+    fn geodesic_distances_match_a_plain_dijkstra() {
+        let (w, h) = (37u32, 23u32);
+        let mut b = OwnedBuffers::flat(w, h);
+        let mut state = 0x2545_f491u32;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        };
+        for i in 0..(w * h) as usize {
+            match next() % 10 {
+                0 => {
+                    b.node[i] = crate::render::NO_NODE;
+                    b.depth[i] = f32::INFINITY;
+                }
+                1 => b.normal[i] = [0.0, 1.0, 0.0],
+                2 => b.depth[i] *= 1.5,
+                _ => {}
+            }
+        }
+        let v = b.view();
+        let costs = StepCosts::new(&v);
+        let sources: Vec<u32> = (0..6).map(|_| next() % (w * h)).collect();
+        let got = geodesic_from(&costs, &v, &sources);
+        let n = (w * h) as usize;
+        let mut want = vec![f32::INFINITY; n];
+        let mut heap = BinaryHeap::new();
+        for &s in &sources {
+            if v.covered(s as usize) {
+                want[s as usize] = 0.0;
+                heap.push(Reverse((0u32, s as usize)));
+            }
+        }
+        while let Some(Reverse((d, i))) = heap.pop() {
+            let d = f32::from_bits(d);
+            if d > want[i] {
+                continue;
+            }
+            for (j, step) in costs.steps(i) {
+                if d + step < want[j] {
+                    want[j] = d + step;
+                    heap.push(Reverse(((d + step).to_bits(), j)));
+                }
+            }
+        }
+        assert!(want.iter().filter(|d| d.is_finite()).count() > n / 2);
+        for i in 0..n {
+            assert!(
+                got[i] == want[i] || (got[i] - want[i]).abs() <= 1e-5 * want[i].max(1.0),
+                "pixel {i}: {} against {}",
+                got[i],
+                want[i]
+            );
+        }
     }
 
     /// A square ring of width `t` between squares [a, b) (outer) on a `size`² mask.
