@@ -40,6 +40,9 @@ pub struct Limits {
     pub part_vertices: usize,
     /// Session lifetime in seconds.
     pub session_ttl_secs: i64,
+    /// Bytes of a model's image-repository images of refinement levels (rendered when first
+    /// asked for, by any reader) past which no more are rendered.
+    pub refined_image_bytes: u64,
 }
 
 impl Default for Limits {
@@ -52,6 +55,7 @@ impl Default for Limits {
             body_bytes: 1024 * 1024,
             part_vertices: 50_000_000,
             session_ttl_secs: 14 * 24 * 3600,
+            refined_image_bytes: 1 << 30,
         }
     }
 }

@@ -36,6 +36,10 @@ pub enum AppError {
     /// The render service refused or failed (busy, no adapter, bad options).
     #[error(transparent)]
     Render(#[from] RenderServiceError),
+    /// The server will not do this now (a storage cap reached); retrying later does not help
+    /// until an admin acts.
+    #[error("{0}")]
+    Unavailable(String),
     /// A server fault (logged where it happens).
     #[error("{0}")]
     Internal(String),

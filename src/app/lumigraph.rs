@@ -274,6 +274,24 @@ impl super::App {
         .map_err(|e| AppError::NotFound(e.to_string()))?;
         g.check_level_key(level, key)
             .map_err(|e| AppError::NotFound(e.to_string()))?;
+        // Any reader can have images rendered: their storage is capped per model.
+        let cap = self.settings.limits.refined_image_bytes;
+        let stored = lumigraph::refined_bytes(&self.db, model_id).await?;
+        if stored as u64 >= cap {
+            tracing::warn!(
+                model_id,
+                stored,
+                cap,
+                "refined repository images at their storage cap: not rendering more"
+            );
+            return Err(AppError::Unavailable(format!(
+                "model {model_id}'s refined repository images have reached their storage cap \
+                 ({stored} of {cap} bytes): image ({}, {}, {}, {}) of level {level} is not \
+                 rendered; coarser levels are served (an admin may raise \
+                 MESHWIKI_REFINED_IMAGES_CAP or rebuild the repository)",
+                key[0], key[1], key[2], key[3]
+            )));
+        }
         let with_albedo = lod.has_colors() || lod.has_texture();
         let service = self.render.clone();
         let ticket = service.admit(sample::frame_bytes(&g)).await?;

@@ -114,6 +114,11 @@ pub struct ServerArgs {
     /// Threads of one LOD build (0: all cores).
     #[arg(long, env = "MESHWIKI_BUILD_THREADS", default_value_t = 0)]
     pub build_threads: usize,
+    /// Storage of a model's image-repository images of refinement levels, rendered when a
+    /// reader first asks for them (e.g. 512M, 4G); past it the server renders no more of them
+    /// (503) and readers keep the coarser levels.
+    #[arg(long, env = "MESHWIKI_REFINED_IMAGES_CAP", default_value = "1G", value_parser = meshwiki::jobs::parse_size)]
+    pub refined_images_cap: u64,
     /// Server-side rendering.
     #[command(flatten)]
     pub render: RenderArgs,
@@ -174,6 +179,7 @@ impl ServerArgs {
         s.limits.upload_bytes = self.max_upload_mb.max(1) * 1024 * 1024;
         s.limits.json_body = self.max_json_kb.max(16) * 1024;
         s.limits.session_ttl_secs = self.session_hours.clamp(1, 24 * 365) * 3600;
+        s.limits.refined_image_bytes = self.refined_images_cap;
         s.trusted_proxies = self.trusted_proxies.clone();
         s.upload_sweep = std::time::Duration::from_secs(self.upload_sweep_secs.clamp(1, 86_400));
         s.build.upload_bytes = self.max_model_upload_mb.max(1).saturating_mul(1024 * 1024);

@@ -398,6 +398,17 @@ async fn entry_at<'e>(
     }))
 }
 
+/// Bytes of `model_id`'s stored images of refinement levels (level > 0).
+pub async fn refined_bytes(db: &Db, model_id: i64) -> Result<i64> {
+    let bytes: i64 = sqlx::query_scalar(
+        "SELECT COALESCE(SUM(bytes), 0) FROM lumigraph_images WHERE model_id = ? AND level > 0",
+    )
+    .bind(model_id)
+    .fetch_one(&db.read)
+    .await?;
+    Ok(bytes)
+}
+
 /// Counts of `model_id`'s recorded keys.
 pub async fn counts(db: &Db, model_id: i64) -> Result<Counts> {
     let r = sqlx::query(

@@ -214,6 +214,10 @@ impl From<AppError> for ApiError {
             }
             AppError::Store(e) => e.into(),
             AppError::Render(e) => e.into(),
+            AppError::Unavailable(message) => ApiError::Unavailable {
+                message,
+                retry_after: None,
+            },
             AppError::Internal(m) => ApiError::Internal(m),
         }
     }

@@ -147,6 +147,8 @@ struct ImageQuery {
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 404, description = "No repository, a key outside the grid (or a finer level's point away from the model), an image not rendered yet, or another version",
             body = super::openapi::ErrorBody),
+        (status = 503, description = "An image of a finer level not rendered: the model's refined images are at their storage cap (MESHWIKI_REFINED_IMAGES_CAP), or the render queue is full",
+            body = super::openapi::ErrorBody),
     ),
     security((), ("sessionCookie" = ["viewer"])))]
 async fn image(

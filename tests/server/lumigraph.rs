@@ -301,6 +301,57 @@ fn an_image_repository_is_built_served_rebuilt_and_deleted() {
     admin.get(&base).assert_error(404);
 }
 
+/// Readers have refined images rendered on first request; their storage is capped per
+/// model (`--refined-images-cap`): past it a new one is 503 with the reason, while what is
+/// stored and the build's own level are still served.
+#[test]
+fn refined_images_stop_at_their_storage_cap() {
+    let dir = data_dir_with_admin();
+    let scans = tempfile::tempdir().unwrap();
+    let model = import(dir.path(), &scan(scans.path()), "Capped");
+    // One byte: the first refined image is rendered, none after it.
+    let server = Server::start_with(dir.path(), &["--refined-images-cap", "1"]);
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let viewer = create_user(&server, &admin, "vera", "viewer");
+    let base = format!("/api/v1/models/{model}/lumigraph");
+    let job = start(&admin, model, json!({"grid": 3, "size": 32}));
+    let j = wait_finished(&admin, job, 300);
+    assert_eq!(j["status"], "done", "{j}");
+    let d = viewer.get(&base).json();
+    let (min, spacing) = (v3(&d["box"]["min"]), d["spacing"].as_f64().unwrap() as f32);
+    // A level-2 point just above the model (as the test above).
+    let s2 = spacing / 4.0;
+    let above = (v3(&d["model_box"][1])[2] - min[2]) / s2;
+    let mut kz = above.ceil() as u32;
+    if kz.is_multiple_of(2) {
+        kz += 1;
+    }
+    let stored_before = stored_images(dir.path());
+    let first = viewer.get(&format!("{base}/images/4/4/{kz}/5?level=2"));
+    assert_eq!(first.status, 200, "{}", first.text());
+    assert_eq!(stored_images(dir.path()), stored_before + 1);
+    let msg = viewer
+        .get(&format!("{base}/images/4/4/{kz}/4?level=2"))
+        .assert_error(503);
+    assert!(msg.contains("storage cap"), "{msg}");
+    assert_eq!(
+        stored_images(dir.path()),
+        stored_before + 1,
+        "nothing stored past the cap"
+    );
+    let c = viewer.get(&base).json()["counts"].clone();
+    assert_eq!(c["refined_images"].as_i64(), Some(1), "{c}");
+    // What is stored is served, and so is level 0.
+    let again = viewer.get(&format!("{base}/images/4/4/{kz}/5?level=2"));
+    assert_eq!((again.status, &again.body), (200, &first.body));
+    let coarse = viewer.get(&format!("{base}/images/0/0/0/0"));
+    assert!(
+        coarse.status == 200 || coarse.status == 204,
+        "{}",
+        coarse.status
+    );
+}
+
 #[test]
 fn a_repository_build_killed_mid_way_resumes_after_restart() {
     let dir = data_dir_with_admin();
