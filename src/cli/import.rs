@@ -43,8 +43,8 @@ pub struct Args {
     /// How the levels are simplified: `quadric` (edge collapses, the default) or `segments`
     /// (the mesh-segmentation paper's segment-driven vertex removal; `meshwiki-bench
     /// simplify` compares the two).
-    #[arg(long, default_value = "quadric")]
-    pub simplifier: Simplifier,
+    #[arg(long)]
+    pub simplifier: Option<Simplifier>,
     /// Account that owns the model (default: the first admin).
     #[arg(long)]
     pub owner: Option<String>,
@@ -109,7 +109,7 @@ async fn import(db: &Db, settings: Settings, args: &Args, bytes: u64) -> anyhow:
             memory_budget: Some(args.memory),
             max_patch_triangles: Some(args.max_patch_triangles),
             threads: args.threads,
-            simplifier: (args.simplifier != Simplifier::Quadric).then_some(args.simplifier),
+            simplifier: args.simplifier,
             ..JobOptions::default()
         },
         running_pid: Some(std::process::id() as i64),

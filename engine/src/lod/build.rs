@@ -69,7 +69,7 @@ impl Default for BuildOptions {
             zstd_level: 19,
             group_size: 8,
             texture_quality: 85,
-            simplifier: Simplifier::Quadric,
+            simplifier: Simplifier::default(),
         }
     }
 }

@@ -39,17 +39,8 @@ pub struct CutStats {
 /// Bounding box `[x0, x1) × [y0, y1)` of the unknown pixels, one pixel of margin.
 fn window(seeds: &Seeds) -> Option<(usize, usize, usize, usize)> {
     let (w, h) = (seeds.width as usize, seeds.height as usize);
-    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-    for (i, &r) in seeds.role.iter().enumerate() {
-        if r == UNKNOWN {
-            let (x, y) = (i % w, i / w);
-            x0 = x0.min(x);
-            y0 = y0.min(y);
-            x1 = x1.max(x + 1);
-            y1 = y1.max(y + 1);
-        }
-    }
-    (x0 != usize::MAX).then(|| {
+    let unknown = seeds.role.iter().map(|&r| r == UNKNOWN);
+    super::mask::bounding_box(unknown, w).map(|[x0, y0, x1, y1]| {
         (
             x0.saturating_sub(1),
             y0.saturating_sub(1),

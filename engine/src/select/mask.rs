@@ -181,6 +181,20 @@ fn grey(pixels: impl Iterator<Item = [u8; 3]>) -> Result<Vec<u8>, MaskError> {
 /// Colour of selected pixels in the result mask image.
 pub const SELECTED_RGBA: [u8; 4] = [0, 160, 255, 255];
 
+/// Bounding box `[x0, y0, x1, y1)` (ends exclusive) of the pixels whose flag is set, in a
+/// row-major view `width` pixels wide; `None` when none is.
+pub fn bounding_box(flags: impl IntoIterator<Item = bool>, width: usize) -> Option<[usize; 4]> {
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for (i, _) in flags.into_iter().enumerate().filter(|(_, f)| *f) {
+        let (x, y) = (i % width, i / width);
+        x0 = x0.min(x);
+        y0 = y0.min(y);
+        x1 = x1.max(x + 1);
+        y1 = y1.max(y + 1);
+    }
+    (x0 != usize::MAX).then_some([x0, y0, x1, y1])
+}
+
 /// The result mask as an RGBA PNG: selected pixels [`SELECTED_RGBA`], the rest transparent
 /// (alpha 255 = selected), ready to overlay on the view.
 pub fn selection_png(width: u32, height: u32, selected: &[bool]) -> Vec<u8> {
@@ -208,6 +222,16 @@ pub fn selection_png(width: u32, height: u32, selected: &[bool]) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bounding_box_ends_are_exclusive() {
+        // 5 wide: pixels (1, 1) and (3, 2) set.
+        let mut flags = [false; 15];
+        flags[6] = true;
+        flags[13] = true;
+        assert_eq!(bounding_box(flags.iter().copied(), 5), Some([1, 1, 4, 3]));
+        assert_eq!(bounding_box([false; 15], 5), None);
+    }
 
     #[test]
     fn png_round_trip() {

@@ -180,17 +180,7 @@ impl Coarse {
     /// pixel the coarse selection or its band may select; `None` when nothing is selected.
     fn window(&self, w: u32, h: u32) -> Option<[u32; 4]> {
         let (cw, ch) = (self.width, self.height);
-        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-        for (c, _) in self.near_selected.iter().enumerate().filter(|(_, s)| **s) {
-            let (x, y) = (c % cw, c / cw);
-            x0 = x0.min(x);
-            y0 = y0.min(y);
-            x1 = x1.max(x + 1);
-            y1 = y1.max(y + 1);
-        }
-        if x0 == usize::MAX {
-            return None;
-        }
+        let [x0, y0, x1, y1] = mask::bounding_box(self.near_selected.iter().copied(), cw)?;
         // Coarse pixel c covers full-resolution pixels [⌈c·w/cw⌉, ⌈(c+1)·w/cw⌉); one more of
         // margin for rounding.
         let (w, h) = (w as usize, h as usize);

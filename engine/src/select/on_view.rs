@@ -116,17 +116,10 @@ fn window(input: &Input<'_>, camera: &Camera) -> Option<[u32; 4]> {
             if mask.width != w || mask.height != h || tool == Tool::Markup {
                 return None;
             }
-            let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
-            for (i, _) in mask.labels.iter().enumerate().filter(|(_, l)| **l != 0) {
-                let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
-                x0 = x0.min(x);
-                y0 = y0.min(y);
-                x1 = x1.max(x);
-                y1 = y1.max(y);
-            }
-            (x0 != u32::MAX)
-                .then(|| square(x0, y0, x1, y1, WINDOW_MARGIN))
-                .flatten()
+            let drawn = mask.labels.iter().map(|&l| l != 0);
+            let [x0, y0, x1, y1] = mask::bounding_box(drawn, w as usize)?.map(|v| v as u32);
+            // `square` takes the last pixel, not the end.
+            square(x0, y0, x1 - 1, y1 - 1, WINDOW_MARGIN)
         }
     }
 }

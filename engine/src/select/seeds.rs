@@ -628,19 +628,24 @@ mod tests {
     use super::*;
     use crate::select::buffers::OwnedBuffers;
 
+    /// A deterministic stream of pseudo-random numbers (Marsaglia's xorshift32).
+    fn xorshift(seed: u32) -> impl FnMut() -> u32 {
+        let mut state = seed;
+        move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        }
+    }
+
     /// The radix heap pops what a binary heap pops, for Dijkstra-like (never decreasing)
     /// pushes: keys spread over every bucket, ties and repeats.
     #[test]
     fn radix_heap_pops_in_key_order() {
         let mut radix = RadixHeap::default();
         let mut binary = BinaryHeap::new();
-        let mut state = 0x9e37_79b9u32;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state
-        };
+        let mut next = xorshift(0x9e37_79b9);
         for k in 0..50u32 {
             let key = next() >> 8;
             radix.push(key, k);
@@ -676,13 +681,7 @@ mod tests {
     fn geodesic_distances_match_a_plain_dijkstra() {
         let (w, h) = (37u32, 23u32);
         let mut b = OwnedBuffers::flat(w, h);
-        let mut state = 0x2545_f491u32;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state
-        };
+        let mut next = xorshift(0x2545_f491);
         for i in 0..(w * h) as usize {
             match next() % 10 {
                 0 => {
