@@ -2,12 +2,14 @@
 //! by the codec's own framing ([`codec::blob_bytes`]), each payload stream also compressed alone
 //! at the build's zstd level to attribute the compressed body to the attributes, for all
 //! patches and for the full-resolution ones (level 0). The file's tables are what is left.
+//! Every patch is also re-encoded in the older `MWP2` layout (meshoptimizer's index codec,
+//! varint residuals, zstd), so the gain of `MWP3` is printed from the same run.
 
 use std::path::Path;
 
 use anyhow::{Context, Result};
 use meshwiki_engine::lod::LodFile;
-use meshwiki_engine::lod::codec::{self, STREAM_NAMES};
+use meshwiki_engine::lod::codec::{self, Layout, PatchRef, STREAM_NAMES};
 
 #[derive(Default)]
 struct Sums {
@@ -45,10 +47,40 @@ impl Sums {
     }
 }
 
+/// A blob re-encoded in the `MWP2` layout (same vertices, ids, precision and attributes).
+fn as_v2(blob: &[u8], grid: &codec::Grid, level: i32) -> Result<Vec<u8>> {
+    let p = codec::decode(blob, grid)?;
+    let (_, payload) = codec::blob_bytes(blob)?;
+    let shift = payload
+        .get(12..16)
+        .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let corner_uvs: Vec<[f32; 2]> = p
+        .indices
+        .iter()
+        .map(|&i| p.uvs.get(i as usize).copied().unwrap_or_default())
+        .collect();
+    let texture = p
+        .image
+        .as_deref()
+        .filter(|_| !p.uvs.is_empty())
+        .map(|image| (corner_uvs.as_slice(), image));
+    let patch = PatchRef {
+        grid_positions: &p.grid_positions,
+        colors: (!p.colors.is_empty()).then_some(p.colors.as_slice()),
+        normals: (!p.normals.is_empty()).then_some(p.normals.as_slice()),
+        original_ids: &p.original_ids,
+        indices: &p.indices,
+        shift,
+        texture,
+    };
+    Ok(codec::encode_layout(&patch, level, Layout::Meshopt).0)
+}
+
 /// Prints the breakdown of the LOD file at `path` (built at zstd `level`).
 pub fn print(path: &Path, level: i32) -> Result<()> {
     let lod = LodFile::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let (mut all, mut leaves) = (Sums::default(), Sums::default());
+    let grid = lod.grid();
+    let (mut all, mut leaves, mut v2) = (Sums::default(), Sums::default(), Sums::default());
     for (id, node) in lod.nodes().iter().enumerate() {
         let blob = lod.blob(id as u32)?;
         let (b, payload) = codec::blob_bytes(blob).with_context(|| format!("patch {id}"))?;
@@ -56,6 +88,9 @@ pub fn print(path: &Path, level: i32) -> Result<()> {
         if node.level == 0 {
             leaves.add(&b, &payload, level);
         }
+        let old = as_v2(blob, &grid, level).with_context(|| format!("patch {id} as MWP2"))?;
+        let (b, payload) = codec::blob_bytes(&old)?;
+        v2.add(&b, &payload, level);
     }
     let file = lod.bytes().len();
     let mb = |b: usize| b as f64 / 1e6;
@@ -69,8 +104,8 @@ pub fn print(path: &Path, level: i32) -> Result<()> {
         mb(leaves.stored)
     );
     println!(
-        "  {:<16} {:>10} {:>14} {:>8} {:>16}",
-        "part", "raw MB", "zstd alone MB", "share", "leaves: alone MB"
+        "  {:<16} {:>10} {:>14} {:>8} {:>16} {:>12}",
+        "part", "raw MB", "zstd alone MB", "share", "leaves: alone MB", "MWP2 MB"
     );
     let alone_total: usize = all.alone.iter().sum::<usize>().max(1);
     // The compressed body attributed to the streams in proportion to their size compressed alone.
@@ -80,12 +115,13 @@ pub fn print(path: &Path, level: i32) -> Result<()> {
             continue;
         }
         println!(
-            "  {:<16} {:>10.2} {:>14.2} {:>7.1}% {:>16.2}",
+            "  {:<16} {:>10.2} {:>14.2} {:>7.1}% {:>16.2} {:>12.2}",
             name,
             mb(all.raw[k]),
             mb(all.alone[k]),
             100.0 * body_share(all.alone[k]) / all.stored.max(1) as f64,
-            mb(leaves.alone[k])
+            mb(leaves.alone[k]),
+            mb(v2.alone[k])
         );
     }
     if all.image > 0 {
@@ -111,6 +147,12 @@ pub fn print(path: &Path, level: i32) -> Result<()> {
         "  (the body is one zstd frame a patch: {:.2} MB for {:.2} MB of streams compressed alone; shares split it by those)",
         mb(all.body),
         mb(alone_total)
+    );
+    println!(
+        "  the same patches in the MWP2 layout (meshoptimizer indices, varints, zstd): {:.2} MB stored; MWP3: {:.2} MB ({:.2}x smaller)",
+        mb(v2.stored),
+        mb(all.stored),
+        v2.stored as f64 / all.stored.max(1) as f64
     );
     Ok(())
 }

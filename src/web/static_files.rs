@@ -47,6 +47,7 @@ pub const JS_MODULES: &[(&str, &str)] = js_modules![
     "lod/cut.js",
     "lod/decode.js",
     "lod/foveation.js",
+    "lod/rangecoder.js",
     "lod/stream.js",
     "lod/table.js",
     "lod/worker.js",

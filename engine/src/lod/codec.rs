@@ -29,10 +29,17 @@ use meshopt::{
 };
 use rustc_hash::FxHashMap as HashMap;
 
+use super::frontcoder::{self, Prediction};
+use super::parallelogram::{Parallelograms, predict};
 use super::patch::{EdgeUses, edge_ends};
+use super::rangecoder::{self, Channel};
 
-/// Blob magic, first 4 bytes.
-pub const BLOB_MAGIC: [u8; 4] = *b"MWP2";
+/// Blob magic, first 4 bytes: front-coded connectivity and range-coded positions, ids and
+/// normals.
+pub const BLOB_MAGIC: [u8; 4] = *b"MWP3";
+/// The older layout (meshoptimizer's index codec, varint residuals), still read, and written
+/// for patches the front coder refuses (a triangle repeating a corner).
+pub const BLOB_MAGIC_V2: [u8; 4] = *b"MWP2";
 const COMPRESSION_NONE: u8 = 0;
 const COMPRESSION_ZSTD: u8 = 1;
 const FLAG_COLORS: u32 = 1;
@@ -323,17 +330,6 @@ struct Predictor {
     last: Option<u32>,
 }
 
-/// How a new vertex is predicted.
-enum Prediction {
-    /// a + b - c
-    Parallelogram(u32, u32, u32),
-    /// (a + b) / 2, floored
-    Midpoint(u32, u32),
-    Copy(u32),
-    /// The first vertex: predicted as zero (positions relative to the patch minimum).
-    Zero,
-}
-
 impl Predictor {
     fn new(n: usize) -> Self {
         Predictor {
@@ -391,22 +387,6 @@ impl Predictor {
     }
 }
 
-fn predict<const N: usize>(values: &[[i64; N]], prediction: &Prediction) -> [i64; N] {
-    match *prediction {
-        // Wrapping: a corrupt blob may hold absurd residuals; the result is range-checked later.
-        Prediction::Parallelogram(a, b, c) => std::array::from_fn(|k| {
-            values[a as usize][k]
-                .wrapping_add(values[b as usize][k])
-                .wrapping_sub(values[c as usize][k])
-        }),
-        Prediction::Midpoint(a, b) => {
-            std::array::from_fn(|k| values[a as usize][k].wrapping_add(values[b as usize][k]) >> 1)
-        }
-        Prediction::Copy(a) => values[a as usize],
-        Prediction::Zero => [0; N],
-    }
-}
-
 fn put_varint(out: &mut Vec<u8>, value: i64) {
     let mut z = ((value << 1) ^ (value >> 63)) as u64;
     loop {
@@ -439,11 +419,27 @@ pub fn encode(patch: &PatchRef<'_>, zstd_level: i32) -> Vec<u8> {
     encode_counted(patch, zstd_level).0
 }
 
+/// The layout a blob is written in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Layout {
+    /// `MWP3`: front-coded connectivity, range-coded residuals (what the build writes).
+    #[default]
+    Front,
+    /// `MWP2`: meshoptimizer's index codec, varint residuals (files built before `MWP3`;
+    /// `bench build` prints its size beside the current one).
+    Meshopt,
+}
+
 /// [`encode`], with the number of vertices the blob holds (more than the patch's where its
 /// texture's charts meet: its decoded vertex count).
 pub fn encode_counted(patch: &PatchRef<'_>, zstd_level: i32) -> (Vec<u8>, usize) {
+    encode_layout(patch, zstd_level, Layout::Front)
+}
+
+/// [`encode_counted`] in a chosen layout.
+pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (Vec<u8>, usize) {
     let Some((corner_uvs, image)) = patch.texture else {
-        return encode_split(patch, None, zstd_level);
+        return encode_split(patch, None, zstd_level, layout);
     };
     let (grid, colors, normals, ids, indices, uvs) = split_wedges(patch, corner_uvs);
     encode_split(
@@ -458,7 +454,155 @@ pub fn encode_counted(patch: &PatchRef<'_>, zstd_level: i32) -> (Vec<u8>, usize)
         },
         Some((&uvs, image)),
         zstd_level,
+        layout,
     )
+}
+
+/// Residual channels of `MWP3` (`docs/FORMAT.md` "Range coding"): positions by axis, by
+/// full or interior precision and by parallelogram or other prediction; ids by prediction;
+/// normals by octahedral component.
+const POSITION_CHANNELS: usize = 16;
+const ID_CHANNELS: usize = 2;
+const NORMAL_CHANNELS: usize = 2;
+
+fn position_channel(axis: usize, interior: bool, prediction: &Prediction) -> usize {
+    let parallelogram = matches!(prediction, Prediction::Parallelogram(..));
+    axis + 3 * interior as usize + 6 * parallelogram as usize
+}
+
+/// The axis closest to the normal of a parallelogram prediction's triangle `(a, b, c)`
+/// (`MWP3`): the surface is smooth across the gate, so the residual along it is the small
+/// one, and it gets its own channel. `None` for other predictions.
+fn normal_axis(pos: &[[i64; 3]], prediction: &Prediction) -> Option<usize> {
+    let Prediction::Parallelogram(a, b, c) = *prediction else {
+        return None;
+    };
+    let [a, b, c] = [a, b, c].map(|v| pos[v as usize].map(|x| x as f64));
+    let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    let n = [
+        (u[1] * w[2] - u[2] * w[1]).abs(),
+        (u[2] * w[0] - u[0] * w[2]).abs(),
+        (u[0] * w[1] - u[1] * w[0]).abs(),
+    ];
+    Some(if n[0] >= n[1] && n[0] >= n[2] {
+        0
+    } else if n[1] >= n[2] {
+        1
+    } else {
+        2
+    })
+}
+
+/// A vertex's position prediction and the axis of its normal (`MWP3`: the multi-way
+/// parallelogram, the normal of the first parallelogram's triangle; `MWP2`: the walk's).
+fn position_guess(
+    multi: Option<&Parallelograms>,
+    pos: &[[i64; 3]],
+    v: usize,
+    prediction: &Prediction,
+) -> ([i64; 3], Option<usize>) {
+    match multi {
+        Some(m) => {
+            let first = m
+                .of_vertex(v)
+                .first()
+                .map(|&[x, y, o]| Prediction::Parallelogram(x, y, o))
+                .unwrap_or(*prediction);
+            (m.position(pos, v, prediction), normal_axis(pos, &first))
+        }
+        None => (predict(pos, prediction), None),
+    }
+}
+
+/// A vertex's id prediction (`MWP3`: the multi-way median; `MWP2`: the walk's).
+fn id_guess(
+    multi: Option<&Parallelograms>,
+    ids: &[[i64; 1]],
+    v: usize,
+    prediction: &Prediction,
+) -> i64 {
+    match multi {
+        Some(m) => m.id(ids, v, prediction),
+        None => predict(ids, prediction)[0],
+    }
+}
+
+/// [`position_channel`] with the axes by role when the prediction gives a normal axis:
+/// channel 0 of the block the normal axis, 1 the two others.
+fn role_channel(
+    axis: usize,
+    interior: bool,
+    prediction: &Prediction,
+    normal: Option<usize>,
+) -> usize {
+    match normal {
+        Some(n) => 12 + (axis != n) as usize + 2 * interior as usize,
+        _ => position_channel(axis, interior, prediction),
+    }
+}
+
+fn id_channel(prediction: &Prediction) -> usize {
+    matches!(prediction, Prediction::Parallelogram(..)) as usize
+}
+
+/// Where residuals go: varints (`MWP2`) or the range coder (`MWP3`).
+enum Sink {
+    Varint(Vec<u8>),
+    Range(rangecoder::Encoder, Vec<Channel>),
+}
+
+impl Sink {
+    fn new(range: bool, channels: usize) -> Self {
+        if range {
+            Sink::Range(rangecoder::Encoder::new(), vec![Channel::new(); channels])
+        } else {
+            Sink::Varint(Vec::new())
+        }
+    }
+
+    fn put(&mut self, channel: usize, value: i64) {
+        match self {
+            Sink::Varint(out) => put_varint(out, value),
+            Sink::Range(enc, channels) => channels[channel].put(enc, value),
+        }
+    }
+
+    fn finish(self) -> Vec<u8> {
+        match self {
+            Sink::Varint(out) => out,
+            Sink::Range(enc, _) => enc.finish(),
+        }
+    }
+}
+
+/// Where residuals come from, mirroring [`Sink`].
+enum Source<'a> {
+    Varint(&'a [u8], usize),
+    Range(rangecoder::Decoder<'a>, Vec<Channel>),
+}
+
+impl<'a> Source<'a> {
+    fn new(range: bool, bytes: &'a [u8], channels: usize) -> Self {
+        if range {
+            Source::Range(
+                rangecoder::Decoder::new(bytes),
+                vec![Channel::new(); channels],
+            )
+        } else {
+            Source::Varint(bytes, 0)
+        }
+    }
+
+    fn get(&mut self, channel: usize, stream: &'static str) -> Result<i64, CodecError> {
+        match self {
+            Source::Varint(bytes, at) => get_varint(bytes, at),
+            Source::Range(dec, channels) => channels[channel]
+                .get(dec)
+                .filter(|_| !dec.overrun())
+                .ok_or(CodecError::Stream(stream)),
+        }
+    }
 }
 
 /// [`encode`] of a patch whose vertices are already one per texture coordinate (`uvs[v]`).
@@ -466,42 +610,59 @@ fn encode_split(
     patch: &PatchRef<'_>,
     texture: Option<(&[[u16; 2]], &[u8])>,
     zstd_level: i32,
+    layout: Layout,
 ) -> (Vec<u8>, usize) {
     let vertex_count = patch.grid_positions.len();
-    let mut indices = meshopt::optimize_vertex_cache(patch.indices, vertex_count);
-    let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertex_count);
-    let used = remap.iter().filter(|&&r| r != u32::MAX).count();
-    for i in &mut indices {
-        *i = remap[*i as usize];
-    }
-    let mut grid = vec![[0u32; 3]; used];
-    let mut ids = vec![0u32; used];
-    let mut colors = patch.colors.map(|_| vec![[0f32; 4]; used]);
-    let mut normals = patch.normals.map(|_| vec![[0f32; 3]; used]);
-    let mut uvs = texture.map(|_| vec![[0u16; 2]; used]);
-    for (old, &new) in remap.iter().enumerate() {
-        if new == u32::MAX {
-            continue;
+    let front = match layout {
+        Layout::Front => frontcoder::encode(patch.indices, vertex_count),
+        Layout::Meshopt => None,
+    };
+    let v3 = front.is_some();
+    // The new vertex order (`order[new] = old`), the triangles on it, each vertex's prediction
+    // and the connectivity stream.
+    let (indices, order, predictions, index_stream) = match front {
+        Some(f) => (f.indices, f.order, f.predictions, f.bytes),
+        None => {
+            let mut indices = meshopt::optimize_vertex_cache(patch.indices, vertex_count);
+            let remap = meshopt::optimize_vertex_fetch_remap(&indices, vertex_count);
+            let used = remap.iter().filter(|&&r| r != u32::MAX).count();
+            for i in &mut indices {
+                *i = remap[*i as usize];
+            }
+            let mut order = vec![0u32; used];
+            for (old, &new) in remap.iter().enumerate() {
+                if new != u32::MAX {
+                    order[new as usize] = old as u32;
+                }
+            }
+            // First-use order: the walk visits the vertices as 0, 1, 2, ...
+            let mut predictions = vec![Prediction::Zero; used];
+            let _ = Predictor::walk(&indices, used, |v, prediction| {
+                predictions[v as usize] = prediction;
+                Ok(())
+            });
+            let stream = encode_index_buffer(&indices, used).unwrap_or_default();
+            (indices, order, predictions, stream)
         }
-        let new = new as usize;
-        grid[new] = patch.grid_positions[old];
-        if let (Some(dst), Some((src, _))) = (uvs.as_mut(), texture) {
-            dst[new] = src[old];
-        }
-        ids[new] = patch.original_ids[old];
-        if let (Some(dst), Some(src)) = (colors.as_mut(), patch.colors) {
-            let c = src[old];
-            dst[new] = [
-                c[0] as f32 / 255.0,
-                c[1] as f32 / 255.0,
-                c[2] as f32 / 255.0,
-                c[3] as f32 / 255.0,
-            ];
-        }
-        if let (Some(dst), Some(src)) = (normals.as_mut(), patch.normals) {
-            dst[new] = src[old];
-        }
-    }
+    };
+    let used = order.len();
+    let pick = |o: &u32| *o as usize;
+    let grid: Vec<[u32; 3]> = order
+        .iter()
+        .map(|o| patch.grid_positions[pick(o)])
+        .collect();
+    let ids: Vec<u32> = order.iter().map(|o| patch.original_ids[pick(o)]).collect();
+    let colors: Option<Vec<[f32; 4]>> = patch.colors.map(|src| {
+        order
+            .iter()
+            .map(|o| src[pick(o)].map(|c| c as f32 / 255.0))
+            .collect()
+    });
+    let normals: Option<Vec<[f32; 3]>> = patch
+        .normals
+        .map(|src| order.iter().map(|o| src[pick(o)]).collect());
+    let uvs: Option<Vec<[u16; 2]>> =
+        texture.map(|(src, _)| order.iter().map(|o| src[pick(o)]).collect());
     let min = if used == 0 {
         [0; 3]
     } else {
@@ -512,35 +673,42 @@ fn encode_split(
     let shift = patch.shift.min(MAX_SHIFT);
     let border = border_vertices(&indices, used);
 
-    // Positions (relative to the patch minimum) and ids, predicted along the triangle order.
+    // Positions (relative to the patch minimum) and ids, each from its prediction.
     let mut decoded_pos: Vec<[i64; 3]> = vec![[0; 3]; used];
     let mut id_values: Vec<[i64; 1]> = vec![[0]; used];
-    let mut pos_stream = Vec::with_capacity(used * 4);
-    let mut id_stream = Vec::with_capacity(used * 2);
-    let _ = Predictor::walk(&indices, used, |v, prediction| {
-        let v = v as usize;
+    let mut pos_sink = Sink::new(v3, POSITION_CHANNELS);
+    let mut id_sink = Sink::new(v3, ID_CHANNELS);
+    let multi = v3.then(|| Parallelograms::of(&indices, used));
+    for v in 0..used {
+        let prediction = predictions[v];
         let actual: [i64; 3] = std::array::from_fn(|k| (grid[v][k] - min[k]) as i64);
-        let guess = predict(&decoded_pos, &prediction);
+        let (guess, normal) = position_guess(multi.as_ref(), &decoded_pos, v, &prediction);
         if border[v] || shift == 0 {
             for k in 0..3 {
-                put_varint(&mut pos_stream, actual[k] - guess[k]);
+                pos_sink.put(
+                    role_channel(k, false, &prediction, normal),
+                    actual[k] - guess[k],
+                );
             }
             decoded_pos[v] = actual;
         } else {
             let half = 1i64 << (shift - 1);
             for k in 0..3 {
                 let q = (actual[k] + half) >> shift;
-                put_varint(&mut pos_stream, q - (guess[k] >> shift));
+                pos_sink.put(
+                    role_channel(k, true, &prediction, normal),
+                    q - (guess[k] >> shift),
+                );
                 decoded_pos[v][k] = q << shift;
             }
         }
-        let id_guess = predict(&id_values, &prediction);
-        put_varint(&mut id_stream, ids[v] as i64 - id_guess[0]);
+        let id_guess = id_guess(multi.as_ref(), &id_values, v, &prediction);
+        id_sink.put(id_channel(&prediction), ids[v] as i64 - id_guess);
         id_values[v] = [ids[v] as i64];
-        Ok(())
-    });
+    }
+    let pos_stream = pos_sink.finish();
+    let id_stream = id_sink.finish();
 
-    let index_stream = encode_index_buffer(&indices, used).unwrap_or_default();
     let color_stream = colors
         .as_ref()
         .map(|c| {
@@ -551,12 +719,14 @@ fn encode_split(
     let mut normal_stream = Vec::new();
     if let Some(n) = normals.as_ref() {
         let predicted = grid_normals(&decoded_pos, &indices);
+        let mut sink = Sink::new(v3, NORMAL_CHANNELS);
         for v in (0..used).filter(|&v| border[v]) {
             let actual = oct_encode(n[v].map(|x| x as f64));
             let guess = oct_encode(predicted[v]);
-            put_varint(&mut normal_stream, actual[0] - guess[0]);
-            put_varint(&mut normal_stream, actual[1] - guess[1]);
+            sink.put(0, actual[0] - guess[0]);
+            sink.put(1, actual[1] - guess[1]);
         }
+        normal_stream = sink.finish();
     }
 
     let uv_stream = uvs
@@ -610,7 +780,7 @@ fn encode_split(
         };
     let image = texture.map(|(_, image)| image);
     let mut blob = Vec::with_capacity(16 + image.map_or(0, |i| i.len()) + body.len());
-    blob.extend_from_slice(&BLOB_MAGIC);
+    blob.extend_from_slice(if v3 { &BLOB_MAGIC } else { &BLOB_MAGIC_V2 });
     let blob_flags = if image.is_some() { BLOB_IMAGE } else { 0 };
     blob.extend_from_slice(&[compression, blob_flags, 0, 0]);
     blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
@@ -619,7 +789,40 @@ fn encode_split(
         blob.extend_from_slice(image);
     }
     blob.extend_from_slice(&body);
+    if v3 && !decodes_back(&blob, &indices, &decoded_pos, min, &ids) {
+        // Never seen: the front coder and its decoder mirror each other, and tests hold them
+        // to it on real scans; should a patch ever not read back, the older layout keeps it.
+        tracing::warn!(
+            triangles = indices.len() / 3,
+            "patch does not decode back in the MWP3 layout; written as MWP2"
+        );
+        return encode_split(patch, texture, zstd_level, Layout::Meshopt);
+    }
     (blob, used)
+}
+
+/// Whether `blob` decodes to the triangles, grid positions (relative to `min`) and ids the
+/// encoder meant.
+fn decodes_back(
+    blob: &[u8],
+    indices: &[u32],
+    pos: &[[i64; 3]],
+    min: [u32; 3],
+    ids: &[u32],
+) -> bool {
+    let unit = Grid {
+        origin: [0.0; 3],
+        step: 1.0,
+    };
+    decode(blob, &unit).is_ok_and(|p| {
+        p.indices == indices
+            && p.original_ids == ids
+            && p.grid_positions.len() == pos.len()
+            && p.grid_positions
+                .iter()
+                .zip(pos)
+                .all(|(g, q)| (0..3).all(|k| g[k] as i64 == q[k] + min[k] as i64))
+    })
 }
 
 fn u32_at(bytes: &[u8], at: usize) -> Result<u32, CodecError> {
@@ -660,6 +863,8 @@ pub struct BlobBytes {
 /// The parts of a blob's framing: its image section and its body, with the payload the body
 /// decompresses to.
 struct Framed<'a> {
+    /// `MWP3` (else `MWP2`).
+    v3: bool,
     image: Option<&'a [u8]>,
     body: &'a [u8],
     payload: Vec<u8>,
@@ -671,9 +876,11 @@ fn unframe(blob: &[u8], max_payload: usize) -> Result<Framed<'_>, CodecError> {
     if blob.len() < 12 {
         return Err(CodecError::Truncated);
     }
-    if blob[..4] != BLOB_MAGIC {
-        return Err(CodecError::Magic);
-    }
+    let v3 = match &blob[..4] {
+        m if m == BLOB_MAGIC => true,
+        m if m == BLOB_MAGIC_V2 => false,
+        _ => return Err(CodecError::Magic),
+    };
     let payload_len = u32_at(blob, 8)? as usize;
     if payload_len > max_payload {
         return Err(CodecError::Sizes);
@@ -696,6 +903,7 @@ fn unframe(blob: &[u8], max_payload: usize) -> Result<Framed<'_>, CodecError> {
         return Err(CodecError::Truncated);
     }
     Ok(Framed {
+        v3,
         image,
         body,
         payload,
@@ -739,8 +947,9 @@ pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
 /// of memory (a few times [`payload_bound`]).
 pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Patch, CodecError> {
     let max_triangles = max_triangles.min(MAX_ELEMENTS);
-    let Framed { image, payload, .. } =
-        unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
+    let Framed {
+        v3, image, payload, ..
+    } = unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
     let image = image.map(<[u8]>::to_vec);
     let vertex_count = u32_at(&payload, 0)?;
     let triangle_count = u32_at(&payload, 4)?;
@@ -779,45 +988,65 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         next(lens[5])?,
     );
     let n = vertex_count as usize;
+    let t = triangle_count as usize;
     // Necessary for any valid blob, and what bounds the allocations below by the blob's own
-    // bytes: at least one code byte per triangle, one byte per varint (three coordinates and
-    // an id per vertex).
-    if (triangle_count as usize) > idx_s.len() || 3 * n > pos_s.len() || n > ids_s.len() {
+    // bytes (`MWP2`: at least one code byte per triangle, one byte per varint; `MWP3`: the
+    // range coder's five flush bytes per stream, and the declared sizes within the file's
+    // triangle budget, checked above).
+    let plausible = if v3 {
+        (t == 0 || idx_s.len() >= 5) && (n == 0 || (pos_s.len() >= 5 && ids_s.len() >= 5))
+    } else {
+        t <= idx_s.len() && 3 * n <= pos_s.len() && n <= ids_s.len()
+    };
+    if !plausible {
         return Err(CodecError::Sizes);
     }
 
-    let indices: Vec<u32> = decode_index_buffer(idx_s, triangle_count as usize * 3)
-        .map_err(|_| CodecError::Stream("indices"))?;
-    if indices.iter().any(|&i| i >= vertex_count) {
-        return Err(CodecError::Stream("indices"));
-    }
+    // Each vertex with its prediction, in decoding order.
+    let (indices, sequence): (Vec<u32>, Vec<(u32, Prediction)>) = if v3 {
+        let (indices, predictions) =
+            frontcoder::decode(idx_s, n, t).map_err(|_| CodecError::Stream("indices"))?;
+        (indices, (0..n as u32).zip(predictions).collect())
+    } else {
+        let indices: Vec<u32> =
+            decode_index_buffer(idx_s, t * 3).map_err(|_| CodecError::Stream("indices"))?;
+        if indices.iter().any(|&i| i >= vertex_count) {
+            return Err(CodecError::Stream("indices"));
+        }
+        let mut sequence = Vec::with_capacity(n);
+        Predictor::walk(&indices, n, |v, prediction| {
+            sequence.push((v, prediction));
+            Ok(())
+        })?;
+        if sequence.len() != n {
+            // Vertices no triangle uses cannot be predicted; valid blobs have none.
+            return Err(CodecError::Stream("positions"));
+        }
+        (indices, sequence)
+    };
     let border = border_vertices(&indices, n);
     let mut pos: Vec<[i64; 3]> = vec![[0; 3]; n];
     let mut ids: Vec<[i64; 1]> = vec![[0]; n];
-    let (mut pos_at, mut ids_at) = (0usize, 0usize);
-    let mut visited = 0usize;
-    Predictor::walk(&indices, n, |v, prediction| {
+    let mut pos_src = Source::new(v3, pos_s, POSITION_CHANNELS);
+    let mut ids_src = Source::new(v3, ids_s, ID_CHANNELS);
+    let multi = v3.then(|| Parallelograms::of(&indices, n));
+    for &(v, prediction) in &sequence {
         let v = v as usize;
-        let guess = predict(&pos, &prediction);
+        let (guess, normal) = position_guess(multi.as_ref(), &pos, v, &prediction);
         if border[v] || shift == 0 {
             for k in 0..3 {
-                pos[v][k] = guess[k].wrapping_add(get_varint(pos_s, &mut pos_at)?);
+                let r = pos_src.get(role_channel(k, false, &prediction, normal), "positions")?;
+                pos[v][k] = guess[k].wrapping_add(r);
             }
         } else {
             for k in 0..3 {
-                pos[v][k] = (guess[k] >> shift)
-                    .wrapping_add(get_varint(pos_s, &mut pos_at)?)
-                    .wrapping_shl(shift);
+                let r = pos_src.get(role_channel(k, true, &prediction, normal), "positions")?;
+                pos[v][k] = (guess[k] >> shift).wrapping_add(r).wrapping_shl(shift);
             }
         }
-        let id_guess = predict(&ids, &prediction);
-        ids[v] = [id_guess[0].wrapping_add(get_varint(ids_s, &mut ids_at)?)];
-        visited += 1;
-        Ok(())
-    })?;
-    if visited != n {
-        // Vertices no triangle uses cannot be predicted; valid blobs have none.
-        return Err(CodecError::Stream("positions"));
+        let id_guess = id_guess(multi.as_ref(), &ids, v, &prediction);
+        let r = ids_src.get(id_channel(&prediction), "original ids")?;
+        ids[v] = [id_guess.wrapping_add(r)];
     }
     let mut grid_positions = Vec::with_capacity(n);
     for p in &pos {
@@ -844,12 +1073,12 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     let normals = if flags & FLAG_NORMALS != 0 {
         let predicted = grid_normals(&pos, &indices);
         let mut normals: Vec<[f32; 3]> = predicted.iter().map(|n| n.map(|x| x as f32)).collect();
-        let mut at = 0usize;
+        let mut src = Source::new(v3, nor_s, NORMAL_CHANNELS);
         for v in (0..n).filter(|&v| border[v]) {
             let guess = oct_encode(predicted[v]);
             let q = [
-                guess[0].wrapping_add(get_varint(nor_s, &mut at)?),
-                guess[1].wrapping_add(get_varint(nor_s, &mut at)?),
+                guess[0].wrapping_add(src.get(0, "normals")?),
+                guess[1].wrapping_add(src.get(1, "normals")?),
             ];
             normals[v] = oct_decode(q);
         }
@@ -1121,50 +1350,61 @@ mod tests {
     #[test]
     fn roundtrip_is_exact_at_full_precision() {
         let (grid, gp, ids, colors, normals, indices) = sheet();
-        let blob = encode(
-            &PatchRef {
-                grid_positions: &gp,
-                colors: Some(&colors),
-                normals: Some(&normals),
-                original_ids: &ids,
-                indices: &indices,
-                shift: 0,
-                texture: None,
-            },
-            3,
-        );
-        let p = decode(&blob, &grid).expect("decodes");
-        let before = canon(
-            indices
-                .chunks(3)
-                .map(|t| [ids[t[0] as usize], ids[t[1] as usize], ids[t[2] as usize]]),
-        );
-        let after = canon(p.indices.chunks(3).map(|t| {
-            [
-                p.original_ids[t[0] as usize],
-                p.original_ids[t[1] as usize],
-                p.original_ids[t[2] as usize],
-            ]
-        }));
-        assert_eq!(before, after);
-        for (i, id) in p.original_ids.iter().enumerate() {
-            let old = ids.iter().position(|x| x == id).expect("id kept");
-            assert_eq!(p.grid_positions[i], gp[old]);
-            assert_eq!(p.positions[i], grid.dequantize(gp[old]));
-            for k in 0..3 {
-                assert!(
-                    (p.colors[i][k] as i32 - colors[old][k] as i32).abs() <= 6,
-                    "{:?} vs {:?}",
-                    p.colors[i],
-                    colors[old]
-                );
+        for layout in [Layout::Front, Layout::Meshopt] {
+            let (blob, _) = encode_layout(
+                &PatchRef {
+                    grid_positions: &gp,
+                    colors: Some(&colors),
+                    normals: Some(&normals),
+                    original_ids: &ids,
+                    indices: &indices,
+                    shift: 0,
+                    texture: None,
+                },
+                3,
+                layout,
+            );
+            assert_eq!(
+                &blob[..4],
+                if layout == Layout::Front {
+                    &BLOB_MAGIC
+                } else {
+                    &BLOB_MAGIC_V2
+                }
+            );
+            let p = decode(&blob, &grid).expect("decodes");
+            let before = canon(
+                indices
+                    .chunks(3)
+                    .map(|t| [ids[t[0] as usize], ids[t[1] as usize], ids[t[2] as usize]]),
+            );
+            let after = canon(p.indices.chunks(3).map(|t| {
+                [
+                    p.original_ids[t[0] as usize],
+                    p.original_ids[t[1] as usize],
+                    p.original_ids[t[2] as usize],
+                ]
+            }));
+            assert_eq!(before, after);
+            for (i, id) in p.original_ids.iter().enumerate() {
+                let old = ids.iter().position(|x| x == id).expect("id kept");
+                assert_eq!(p.grid_positions[i], gp[old]);
+                assert_eq!(p.positions[i], grid.dequantize(gp[old]));
+                for k in 0..3 {
+                    assert!(
+                        (p.colors[i][k] as i32 - colors[old][k] as i32).abs() <= 6,
+                        "{:?} vs {:?}",
+                        p.colors[i],
+                        colors[old]
+                    );
+                }
             }
-        }
-        let border = border_vertices(&p.indices, p.positions.len());
-        for (i, b) in border.iter().enumerate() {
-            if *b {
-                let d: f32 = (0..3).map(|k| p.normals[i][k] * normals[0][k]).sum();
-                assert!(d > 0.9995, "border normal error {d}");
+            let border = border_vertices(&p.indices, p.positions.len());
+            for (i, b) in border.iter().enumerate() {
+                if *b {
+                    let d: f32 = (0..3).map(|k| p.normals[i][k] * normals[0][k]).sum();
+                    assert!(d > 0.9995, "border normal error {d}");
+                }
             }
         }
     }
@@ -1173,28 +1413,39 @@ mod tests {
     fn coarse_interior_moves_at_most_half_a_coarse_step_and_border_is_exact() {
         let (grid, gp, ids, _, _, indices) = sheet();
         let shift = 4;
-        let blob = encode(
-            &PatchRef {
-                grid_positions: &gp,
-                colors: None,
-                normals: None,
-                original_ids: &ids,
-                indices: &indices,
-                shift,
-                texture: None,
-            },
-            3,
-        );
-        let p = decode(&blob, &grid).expect("decodes");
-        let border = border_vertices(&p.indices, p.positions.len());
-        for (i, id) in p.original_ids.iter().enumerate() {
-            let old = ids.iter().position(|x| x == id).expect("id kept");
-            for (k, &expected) in gp[old].iter().enumerate() {
-                let d = (p.grid_positions[i][k] as i64 - expected as i64).abs();
-                if border[i] {
-                    assert_eq!(d, 0);
+        for layout in [Layout::Front, Layout::Meshopt] {
+            let (blob, _) = encode_layout(
+                &PatchRef {
+                    grid_positions: &gp,
+                    colors: None,
+                    normals: None,
+                    original_ids: &ids,
+                    indices: &indices,
+                    shift,
+                    texture: None,
+                },
+                3,
+                layout,
+            );
+            assert_eq!(
+                &blob[..4],
+                if layout == Layout::Front {
+                    &BLOB_MAGIC
                 } else {
-                    assert!(d <= 1 << (shift - 1), "moved {d}");
+                    &BLOB_MAGIC_V2
+                }
+            );
+            let p = decode(&blob, &grid).expect("decodes");
+            let border = border_vertices(&p.indices, p.positions.len());
+            for (i, id) in p.original_ids.iter().enumerate() {
+                let old = ids.iter().position(|x| x == id).expect("id kept");
+                for (k, &expected) in gp[old].iter().enumerate() {
+                    let d = (p.grid_positions[i][k] as i64 - expected as i64).abs();
+                    if border[i] {
+                        assert_eq!(d, 0);
+                    } else {
+                        assert!(d <= 1 << (shift - 1), "moved {d}");
+                    }
                 }
             }
         }
@@ -1229,26 +1480,37 @@ mod tests {
         assert!(decode(b"", &grid).is_err());
         assert!(decode(b"MWP2\x01\0\0\0\xff\xff\xff\x00garbage", &grid).is_err());
         let (_, gp, ids, colors, normals, indices) = sheet();
-        let blob = encode(
-            &PatchRef {
-                grid_positions: &gp,
-                colors: Some(&colors),
-                normals: Some(&normals),
-                original_ids: &ids,
-                indices: &indices,
-                shift: 2,
-                texture: None,
-            },
-            0,
-        );
-        for cut in (0..blob.len()).step_by(7) {
-            let _ = decode(&blob[..cut], &grid);
-        }
-        let mut flipped = blob.clone();
-        for i in 12..flipped.len() {
-            flipped[i] ^= 0x5a;
-            let _ = decode(&flipped, &grid);
-            flipped[i] ^= 0x5a;
+        for layout in [Layout::Front, Layout::Meshopt] {
+            let (blob, _) = encode_layout(
+                &PatchRef {
+                    grid_positions: &gp,
+                    colors: Some(&colors),
+                    normals: Some(&normals),
+                    original_ids: &ids,
+                    indices: &indices,
+                    shift: 2,
+                    texture: None,
+                },
+                0,
+                layout,
+            );
+            assert_eq!(
+                &blob[..4],
+                if layout == Layout::Front {
+                    &BLOB_MAGIC
+                } else {
+                    &BLOB_MAGIC_V2
+                }
+            );
+            for cut in (0..blob.len()).step_by(7) {
+                let _ = decode(&blob[..cut], &grid);
+            }
+            let mut flipped = blob.clone();
+            for i in 12..flipped.len() {
+                flipped[i] ^= 0x5a;
+                let _ = decode(&flipped, &grid);
+                flipped[i] ^= 0x5a;
+            }
         }
     }
 }

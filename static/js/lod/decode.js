@@ -6,12 +6,20 @@
 // doubles holding exact integers (|v| < 2^53); no 32-bit bitwise operator touches them.
 // Normals: every vertex gets the area-weighted normal of the integer grid positions (f64,
 // exact); border vertices add a stored octahedral residual (8 bits) to that prediction.
+// Layouts: `MWP3` blobs (what builds write) have front-coded connectivity and range-coded
+// positions, ids and normals predicted by multi-way parallelograms (./rangecoder.js);
+// `MWP2` blobs (older files) meshoptimizer's index codec and varint residuals.
 // Textures (docs/FORMAT.md "Patch blob", "Textures"): a textured blob carries its atlas (a
 // JPEG) in an image section before the payload, and the payload a sixth stream of u16 texture
 // coordinates; vertices where the atlas' charts meet come once per chart (same original id,
 // same grid position), which changes nothing else here.
 
-const MAGIC = [0x4d, 0x57, 0x50, 0x32]; // "MWP2"
+import { Channel, RangeDecoder, decodeConnectivity, parallelograms, PARALLELOGRAM } from './rangecoder.js';
+
+const MAGIC = [0x4d, 0x57, 0x50]; // "MWP", then '2' or '3' (the layout version)
+const POSITION_CHANNELS = 16;
+const ID_CHANNELS = 2;
+const NORMAL_CHANNELS = 2;
 const COMPRESSION_NONE = 0;
 const COMPRESSION_ZSTD = 1;
 const FLAG_COLORS = 1;
@@ -322,6 +330,94 @@ export function jpegSize(bytes) {
   return null;
 }
 
+/** A reader of range-coded residuals by channel (engine: codec's `Source::Range`). */
+function residualSource(bytes, channels, name) {
+  const dec = new RangeDecoder(bytes);
+  const ch = Array.from({ length: channels }, () => new Channel());
+  return (c) => {
+    const r = ch[c].get(dec);
+    if (r === null || dec.overrun) throw new DecodeError(`stream ${name} does not decode`);
+    return r;
+  };
+}
+
+/**
+ * `MWP3` positions and ids (engine: codec's decode loop with `position_guess`, `id_guess`,
+ * `role_channel`): each vertex in order, predicted by the mean of its multi-way
+ * parallelograms (ids: the median of the clamped ones), or by its traversal prediction when
+ * it has none; position residuals by channel of the axis' role.
+ */
+function decodeResiduals(conn, indices, n, shift, border, posS, idsS, pos, ids) {
+  const { kind, pa, pb, pc } = conn;
+  const multi = parallelograms(indices, n);
+  const posSource = residualSource(posS, POSITION_CHANNELS, 'positions');
+  const idSource = residualSource(idsS, ID_CHANNELS, 'original ids');
+  const guess = [0, 0, 0];
+  const values = [];
+  for (let v = 0; v < n; v++) {
+    const from = multi.start[v];
+    const to = multi.start[v + 1];
+    const isPara = kind[v] === PARALLELOGRAM;
+    let normal = -1;
+    if (to > from) {
+      const m = to - from;
+      for (let k = 0; k < 3; k++) {
+        let sum = 0;
+        for (let j = from; j < to; j++) {
+          const x = multi.triples[3 * j];
+          const y = multi.triples[3 * j + 1];
+          const o = multi.triples[3 * j + 2];
+          sum += pos[x * 3 + k] + pos[y * 3 + k] - pos[o * 3 + k];
+        }
+        guess[k] = Math.floor(sum / m);
+      }
+      normal = normalAxis(pos, multi.triples[3 * from], multi.triples[3 * from + 1], multi.triples[3 * from + 2]);
+    } else {
+      for (let k = 0; k < 3; k++) guess[k] = predict(pos, 3, k, kind[v], pa[v], pb[v], pc[v]);
+      if (isPara) normal = normalAxis(pos, pa[v], pb[v], pc[v]);
+    }
+    const interior = !(border[v] || shift === 0);
+    for (let k = 0; k < 3; k++) {
+      const channel =
+        normal >= 0
+          ? 12 + (k !== normal ? 1 : 0) + (interior ? 2 : 0)
+          : k + (interior ? 3 : 0) + (isPara ? 6 : 0);
+      const r = posSource(channel);
+      pos[v * 3 + k] = interior ? (floorShift(guess[k], shift) + r) * 2 ** shift : guess[k] + r;
+    }
+    let id;
+    if (to > from) {
+      values.length = 0;
+      for (let j = from; j < to; j++) {
+        const a = ids[multi.triples[3 * j]];
+        const b = ids[multi.triples[3 * j + 1]];
+        const c = ids[multi.triples[3 * j + 2]];
+        values.push(Math.min(Math.max(a + b - c, Math.min(a, b)), Math.max(a, b)));
+      }
+      values.sort((x, y) => x - y);
+      id = values[values.length >> 1];
+    } else {
+      id = predict(ids, 1, 0, kind[v], pa[v], pb[v], pc[v]);
+    }
+    ids[v] = id + idSource(isPara ? 1 : 0);
+  }
+}
+
+/** The axis closest to the normal of triangle (a, b, c) (engine: codec's `normal_axis`). */
+function normalAxis(pos, a, b, c) {
+  const u0 = pos[b * 3] - pos[a * 3];
+  const u1 = pos[b * 3 + 1] - pos[a * 3 + 1];
+  const u2 = pos[b * 3 + 2] - pos[a * 3 + 2];
+  const w0 = pos[c * 3] - pos[a * 3];
+  const w1 = pos[c * 3 + 1] - pos[a * 3 + 1];
+  const w2 = pos[c * 3 + 2] - pos[a * 3 + 2];
+  const n0 = Math.abs(u1 * w2 - u2 * w1);
+  const n1 = Math.abs(u2 * w0 - u0 * w2);
+  const n2 = Math.abs(u0 * w1 - u1 * w0);
+  if (n0 >= n1 && n0 >= n2) return 0;
+  return n1 >= n2 ? 1 : 2;
+}
+
 /**
  * Decodes one patch blob.
  * @param {Uint8Array} blob
@@ -339,7 +435,9 @@ export function jpegSize(bytes) {
 export function decodePatch(blob, grid, deps) {
   if (!(blob instanceof Uint8Array)) throw new DecodeError('blob must be a Uint8Array');
   if (blob.length < 12) throw new DecodeError('blob truncated');
-  for (let i = 0; i < 4; i++) if (blob[i] !== MAGIC[i]) throw new DecodeError('bad blob magic');
+  for (let i = 0; i < 3; i++) if (blob[i] !== MAGIC[i]) throw new DecodeError('bad blob magic');
+  if (blob[3] !== 0x32 && blob[3] !== 0x33) throw new DecodeError('bad blob magic');
+  const v3 = blob[3] === 0x33;
   const payloadLen = u32(blob, 8);
   if (payloadLen > MAX_PAYLOAD) throw new DecodeError('patch declares implausible sizes');
   // Blob flags (byte 5): with an image section, the payload starts after it.
@@ -386,39 +484,52 @@ export function decodePatch(blob, grid, deps) {
   const [idxS, posS, idsS, colS, norS, uvS] = streams;
   const { meshopt } = deps;
 
-  const indexBytes = new Uint8Array(t * 3 * 4);
-  if (t > 0) {
+  const pos = new Float64Array(n * 3);
+  const ids = new Float64Array(n);
+  let indices;
+  let border;
+  if (v3) {
+    let conn;
     try {
-      meshopt.decodeIndexBuffer(indexBytes, t * 3, 4, idxS);
+      conn = decodeConnectivity(idxS, n, t);
     } catch {
       throw new DecodeError('stream indices does not decode');
     }
-  }
-  const indices = new Uint32Array(indexBytes.buffer, 0, t * 3);
-  for (let i = 0; i < indices.length; i++) {
-    if (indices[i] >= n) throw new DecodeError('stream indices does not decode');
-  }
-  const border = borderVertices(indices, n);
-
-  const pos = new Float64Array(n * 3);
-  const ids = new Float64Array(n);
-  const posCursor = { at: 0 };
-  const idsCursor = { at: 0 };
-  const visited = walk(indices, n, (v, kind, a, b, c) => {
-    if (border[v] || shift === 0) {
-      for (let k = 0; k < 3; k++) {
-        pos[v * 3 + k] = predict(pos, 3, k, kind, a, b, c) + readVarint(posS, posCursor);
-      }
-    } else {
-      const scale = 2 ** shift;
-      for (let k = 0; k < 3; k++) {
-        const guess = floorShift(predict(pos, 3, k, kind, a, b, c), shift);
-        pos[v * 3 + k] = (guess + readVarint(posS, posCursor)) * scale;
+    indices = conn.indices;
+    border = borderVertices(indices, n);
+    decodeResiduals(conn, indices, n, shift, border, posS, idsS, pos, ids);
+  } else {
+    const indexBytes = new Uint8Array(t * 3 * 4);
+    if (t > 0) {
+      try {
+        meshopt.decodeIndexBuffer(indexBytes, t * 3, 4, idxS);
+      } catch {
+        throw new DecodeError('stream indices does not decode');
       }
     }
-    ids[v] = predict(ids, 1, 0, kind, a, b, c) + readVarint(idsS, idsCursor);
-  });
-  if (visited !== n) throw new DecodeError('stream positions does not decode');
+    indices = new Uint32Array(indexBytes.buffer, 0, t * 3);
+    for (let i = 0; i < indices.length; i++) {
+      if (indices[i] >= n) throw new DecodeError('stream indices does not decode');
+    }
+    border = borderVertices(indices, n);
+    const posCursor = { at: 0 };
+    const idsCursor = { at: 0 };
+    const visited = walk(indices, n, (v, kind, a, b, c) => {
+      if (border[v] || shift === 0) {
+        for (let k = 0; k < 3; k++) {
+          pos[v * 3 + k] = predict(pos, 3, k, kind, a, b, c) + readVarint(posS, posCursor);
+        }
+      } else {
+        const scale = 2 ** shift;
+        for (let k = 0; k < 3; k++) {
+          const guess = floorShift(predict(pos, 3, k, kind, a, b, c), shift);
+          pos[v * 3 + k] = (guess + readVarint(posS, posCursor)) * scale;
+        }
+      }
+      ids[v] = predict(ids, 1, 0, kind, a, b, c) + readVarint(idsS, idsCursor);
+    });
+    if (visited !== n) throw new DecodeError('stream positions does not decode');
+  }
 
   const gridPositions = new Uint32Array(n * 3);
   const positions = new Float32Array(n * 3);
@@ -454,11 +565,12 @@ export function decodePatch(blob, grid, deps) {
     normals = Float32Array.from(predicted);
     const cursor = { at: 0 };
     const q = [0, 0];
+    const source = v3 ? residualSource(norS, NORMAL_CHANNELS, 'normals') : null;
     for (let v = 0; v < n; v++) {
       if (!border[v]) continue;
       octEncode(predicted[v * 3], predicted[v * 3 + 1], predicted[v * 3 + 2], q);
-      const qx = q[0] + readVarint(norS, cursor);
-      const qy = q[1] + readVarint(norS, cursor);
+      const qx = q[0] + (v3 ? source(0) : readVarint(norS, cursor));
+      const qy = q[1] + (v3 ? source(1) : readVarint(norS, cursor));
       octDecode(qx, qy, normals, v * 3);
     }
   }
