@@ -81,7 +81,7 @@ impl Default for BuildSettings {
             workers: 1,
             memory_budget: 1 << 30,
             threads: None,
-            max_patch_triangles: 4096,
+            max_patch_triangles: meshwiki_engine::lod::build::DEFAULT_MAX_PATCH_TRIANGLES,
             upload_bytes: 64 << 30,
         }
     }

@@ -27,7 +27,7 @@ pub struct Args {
     #[arg(long, default_value = "1G", value_parser = parse_size)]
     pub memory: u64,
     /// Triangle budget of every patch.
-    #[arg(long, default_value_t = 4096)]
+    #[arg(long, default_value_t = meshwiki_engine::lod::build::DEFAULT_MAX_PATCH_TRIANGLES)]
     pub max_patch_triangles: u32,
     /// Build threads (default: all cores).
     #[arg(long)]

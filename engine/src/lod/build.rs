@@ -59,10 +59,16 @@ pub struct BuildOptions {
     pub simplifier: Simplifier,
 }
 
+/// The default triangle budget of a patch (the build's, the server's and the CLI's). Larger
+/// patches compress better (8192 makes the dragon's file 5% smaller, the 100k scans' 8–10%)
+/// but refine the view coarser: along `scripts/bench-stream`'s dragon path 8192 sent 2.82 MB
+/// and drew 593k triangles where 4096 sends 2.34 MB and draws 436k.
+pub const DEFAULT_MAX_PATCH_TRIANGLES: u32 = 4096;
+
 impl Default for BuildOptions {
     fn default() -> Self {
         BuildOptions {
-            max_patch_triangles: 4096,
+            max_patch_triangles: DEFAULT_MAX_PATCH_TRIANGLES as usize,
             memory_budget: 1 << 30,
             threads: None,
             scratch_dir: None,
