@@ -464,6 +464,7 @@ pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (
 const POSITION_CHANNELS: usize = 16;
 const ID_CHANNELS: usize = 2;
 const NORMAL_CHANNELS: usize = 2;
+const COLOUR_CHANNELS: usize = 4;
 
 fn position_channel(axis: usize, interior: bool, prediction: &Prediction) -> usize {
     let parallelogram = matches!(prediction, Prediction::Parallelogram(..));
@@ -492,6 +493,24 @@ fn normal_axis(pos: &[[i64; 3]], prediction: &Prediction) -> Option<usize> {
     } else {
         2
     })
+}
+
+/// The four bytes of a filtered colour as `MWP3` predicts them: luma and alpha unsigned,
+/// the chroma bytes signed (so a grey's chroma is near 0, not near 0 and 255).
+fn colour_values(f: [u8; 4]) -> [i64; 4] {
+    [
+        f[0] as i64,
+        f[1] as i8 as i64,
+        f[2] as i8 as i64,
+        f[3] as i64,
+    ]
+}
+
+/// The bytes of [`colour_values`]; `None` out of range (a damaged blob).
+fn colour_bytes(x: [i64; 4]) -> Option<[u8; 4]> {
+    let u = |v: i64| u8::try_from(v).ok();
+    let s = |v: i64| i8::try_from(v).ok().map(|b| b as u8);
+    Some([u(x[0])?, s(x[1])?, s(x[2])?, u(x[3])?])
 }
 
 /// A vertex's position prediction and the axis of its normal (`MWP3`: the multi-way
@@ -713,7 +732,21 @@ fn encode_split(
         .as_ref()
         .map(|c| {
             let filtered: Vec<[u8; 4]> = meshopt::encode_filter_color(c, COLOR_BITS);
-            encode_vertex_buffer(&filtered).unwrap_or_default()
+            match multi.as_ref() {
+                Some(m) => {
+                    let values: Vec<[i64; 4]> =
+                        filtered.iter().map(|&f| colour_values(f)).collect();
+                    let mut sink = Sink::new(true, COLOUR_CHANNELS);
+                    for v in 0..used {
+                        let guess = m.colour(&values, v, &predictions[v]);
+                        for k in 0..4 {
+                            sink.put(k, values[v][k] - guess[k]);
+                        }
+                    }
+                    sink.finish()
+                }
+                None => encode_vertex_buffer(&filtered).unwrap_or_default(),
+            }
         })
         .unwrap_or_default();
     let mut normal_stream = Vec::new();
@@ -1063,8 +1096,23 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     let positions: Vec<[f32; 3]> = grid_positions.iter().map(|&g| grid.dequantize(g)).collect();
 
     let colors = if flags & FLAG_COLORS != 0 {
-        let mut c: Vec<[u8; 4]> =
-            decode_vertex_buffer(col_s, n).map_err(|_| CodecError::Stream("colors"))?;
+        let mut c: Vec<[u8; 4]> = match multi.as_ref() {
+            Some(m) => {
+                let mut values: Vec<[i64; 4]> = vec![[0; 4]; n];
+                let mut bytes: Vec<[u8; 4]> = vec![[0; 4]; n];
+                let mut src = Source::new(true, col_s, COLOUR_CHANNELS);
+                for &(v, prediction) in &sequence {
+                    let v = v as usize;
+                    let guess = m.colour(&values, v, &prediction);
+                    for k in 0..4 {
+                        values[v][k] = guess[k].wrapping_add(src.get(k, "colors")?);
+                    }
+                    bytes[v] = colour_bytes(values[v]).ok_or(CodecError::Stream("colors"))?;
+                }
+                bytes
+            }
+            None => decode_vertex_buffer(col_s, n).map_err(|_| CodecError::Stream("colors"))?,
+        };
         decode_ycocg(&mut c);
         c
     } else {

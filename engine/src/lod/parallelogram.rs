@@ -118,6 +118,40 @@ impl Parallelograms {
     }
 }
 
+impl Parallelograms {
+    /// The prediction of `v`'s colour (`MWP3`, the four bytes of meshoptimizer's YCoCg
+    /// filter, the chroma ones signed): the floored mean over its parallelograms' `x` and `y`
+    /// corners, its earlier neighbours (colour varies too irregularly for parallelograms);
+    /// without any, the mean of the traversal prediction's first two vertices (its one
+    /// vertex for a copy; zero for the very first).
+    pub fn colour(&self, values: &[[i64; 4]], v: usize, fallback: &Prediction) -> [i64; 4] {
+        let list = self.of_vertex(v);
+        let mean = |vs: &mut dyn Iterator<Item = u32>| -> [i64; 4] {
+            let (mut sum, mut m) = ([0i64; 4], 0i64);
+            for u in vs {
+                for k in 0..4 {
+                    sum[k] += values[u as usize][k];
+                }
+                m += 1;
+            }
+            if m == 0 {
+                return [0; 4];
+            }
+            sum.map(|x| x.div_euclid(m))
+        };
+        if !list.is_empty() {
+            return mean(&mut list.iter().flat_map(|&[x, y, _]| [x, y]));
+        }
+        match *fallback {
+            Prediction::Parallelogram(a, b, _) | Prediction::Midpoint(a, b) => {
+                mean(&mut [a, b].into_iter())
+            }
+            Prediction::Copy(a) => values[a as usize],
+            Prediction::Zero => [0; 4],
+        }
+    }
+}
+
 /// The value of a traversal prediction (`frontcoder::Prediction`) over `values`.
 pub fn predict<const N: usize>(values: &[[i64; N]], prediction: &Prediction) -> [i64; N] {
     match *prediction {

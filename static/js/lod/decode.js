@@ -14,7 +14,7 @@
 // coordinates; vertices where the atlas' charts meet come once per chart (same original id,
 // same grid position), which changes nothing else here.
 
-import { Channel, RangeDecoder, decodeConnectivity, parallelograms, PARALLELOGRAM } from './rangecoder.js';
+import { Channel, RangeDecoder, decodeConnectivity, parallelograms, COPY, MIDPOINT, PARALLELOGRAM } from './rangecoder.js';
 
 const MAGIC = [0x4d, 0x57, 0x50]; // "MWP", then '2' or '3' (the layout version)
 const POSITION_CHANNELS = 16;
@@ -347,9 +347,8 @@ function residualSource(bytes, channels, name) {
  * parallelograms (ids: the median of the clamped ones), or by its traversal prediction when
  * it has none; position residuals by channel of the axis' role.
  */
-function decodeResiduals(conn, indices, n, shift, border, posS, idsS, pos, ids) {
+function decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids) {
   const { kind, pa, pb, pc } = conn;
-  const multi = parallelograms(indices, n);
   const posSource = residualSource(posS, POSITION_CHANNELS, 'positions');
   const idSource = residualSource(idsS, ID_CHANNELS, 'original ids');
   const guess = [0, 0, 0];
@@ -400,6 +399,50 @@ function decodeResiduals(conn, indices, n, shift, border, posS, idsS, pos, ids) 
       id = predict(ids, 1, 0, kind[v], pa[v], pb[v], pc[v]);
     }
     ids[v] = id + idSource(isPara ? 1 : 0);
+  }
+}
+
+/**
+ * `MWP3` colours (engine: codec's colour loop with `Parallelograms::colour`): the four
+ * filtered bytes per vertex (chroma signed), each predicted by the floored mean over the
+ * vertex's parallelograms' x and y corners, or else over its traversal prediction's first
+ * two vertices (one for a copy, none for the first vertex), plus a range-coded residual.
+ * Writes the filtered bytes into `out` (n × 4).
+ */
+function decodeColours(conn, multi, n, colS, out) {
+  const { kind, pa, pb } = conn;
+  const source = residualSource(colS, 4, 'colors');
+  const values = new Float64Array(n * 4);
+  const sum = [0, 0, 0, 0];
+  for (let v = 0; v < n; v++) {
+    const from = multi.start[v];
+    const to = multi.start[v + 1];
+    sum.fill(0);
+    let m = 0;
+    const add = (u) => {
+      for (let k = 0; k < 4; k++) sum[k] += values[u * 4 + k];
+      m++;
+    };
+    if (to > from) {
+      for (let j = from; j < to; j++) {
+        add(multi.triples[3 * j]);
+        add(multi.triples[3 * j + 1]);
+      }
+    } else if (kind[v] === PARALLELOGRAM || kind[v] === MIDPOINT) {
+      add(pa[v]);
+      add(pb[v]);
+    } else if (kind[v] === COPY) {
+      add(pa[v]);
+    }
+    for (let k = 0; k < 4; k++) {
+      const value = (m > 0 ? Math.floor(sum[k] / m) : 0) + source(k);
+      const signed = k === 1 || k === 2;
+      if (signed ? value < -128 || value > 127 : value < 0 || value > 255) {
+        throw new DecodeError('stream colors does not decode');
+      }
+      values[v * 4 + k] = value;
+      out[v * 4 + k] = value & 0xff;
+    }
   }
 }
 
@@ -488,8 +531,9 @@ export function decodePatch(blob, grid, deps) {
   const ids = new Float64Array(n);
   let indices;
   let border;
+  let conn = null;
+  let multi = null;
   if (v3) {
-    let conn;
     try {
       conn = decodeConnectivity(idxS, n, t);
     } catch {
@@ -497,7 +541,8 @@ export function decodePatch(blob, grid, deps) {
     }
     indices = conn.indices;
     border = borderVertices(indices, n);
-    decodeResiduals(conn, indices, n, shift, border, posS, idsS, pos, ids);
+    multi = parallelograms(indices, n);
+    decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids);
   } else {
     const indexBytes = new Uint8Array(t * 3 * 4);
     if (t > 0) {
@@ -551,10 +596,14 @@ export function decodePatch(blob, grid, deps) {
   if (flags & FLAG_COLORS) {
     colors = new Uint8Array(n * 4);
     if (n > 0) {
-      try {
-        meshopt.decodeVertexBuffer(colors, n, 4, colS);
-      } catch {
-        throw new DecodeError('stream colors does not decode');
+      if (v3) {
+        decodeColours(conn, multi, n, colS, colors);
+      } else {
+        try {
+          meshopt.decodeVertexBuffer(colors, n, 4, colS);
+        } catch {
+          throw new DecodeError('stream colors does not decode');
+        }
       }
       decodeYCoCg(colors);
     }
