@@ -540,8 +540,8 @@ export function decodePatch(blob, grid, deps) {
       throw new DecodeError('stream indices does not decode');
     }
     indices = conn.indices;
-    border = borderVertices(indices, n);
     multi = parallelograms(indices, n);
+    border = multi.border;
     decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids);
   } else {
     const indexBytes = new Uint8Array(t * 3 * 4);

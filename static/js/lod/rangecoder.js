@@ -25,10 +25,8 @@ export class Bits {
   }
 }
 
-function rate(seen) {
-  // 1 + the bit length of seen + 2, capped (engine: Bit::rate).
-  return Math.min(1 + (32 - Math.clz32(seen + 2)), MAX_RATE);
-}
+/** The adaptation shift after `seen` bits: 1 + the bit length of seen + 2, capped (engine: Bit::rate). */
+const RATE = Uint8Array.from({ length: 256 }, (_, seen) => Math.min(1 + (32 - Math.clz32(seen + 2)), MAX_RATE));
 
 /** Range decoder (LZMA's); reading past the end yields zero bytes and sets `overrun`. */
 export class RangeDecoder {
@@ -70,10 +68,11 @@ export class RangeDecoder {
       this.range -= bound;
       bit = 1;
     }
-    const r = rate(bits.seen[i]);
+    const seen = bits.seen[i];
+    const r = RATE[seen];
     bits.p[i] = bit ? p - (p >>> r) : p + ((PROB_ONE - p) >>> r);
-    if (bits.seen[i] < 255) bits.seen[i]++;
-    this.normalize();
+    if (seen < 255) bits.seen[i] = seen + 1;
+    if (this.range < TOP) this.normalize();
     return bit;
   }
 
@@ -88,7 +87,7 @@ export class RangeDecoder {
         bit = 1;
       }
       value = value * 2 + bit;
-      this.normalize();
+      if (this.range < TOP) this.normalize();
     }
     return value;
   }
@@ -332,32 +331,53 @@ export function decodeConnectivity(bytes, n, t) {
 
 /**
  * Multi-way parallelograms (engine: parallelogram.rs): for each vertex, the triples
- * (x, y, o) as flat arrays `start` (n + 1) and `triples` (3 per entry).
+ * (x, y, o) as flat arrays `start` (n + 1) and `triples` (3 per entry); with the border
+ * vertices (`border`, as decode.js `borderVertices` finds them) from the same edge table.
  */
 export function parallelograms(indices, n) {
   const t = indices.length / 3;
-  // Undirected edge -> slot; each slot's triangles in order: the first two in typed arrays,
-  // any further ones (non-manifold edges) in `more`.
-  const slotOf = new Map();
-  const first = new Int32Array(3 * t);
-  const second = new Int32Array(3 * t).fill(-1);
+  // Undirected edges in an open-addressing table (Map keys above 2^31 are slow): per slot
+  // its two ends, its first two triangles in order and its use count; further triangles of
+  // non-manifold edges in `more`.
+  let cap = 16;
+  while (cap < 6 * t) cap *= 2;
+  const mask = cap - 1;
+  const lo = new Int32Array(cap).fill(-1);
+  const hi = new Int32Array(cap);
+  const first = new Int32Array(cap);
+  const second = new Int32Array(cap).fill(-1);
+  const uses = new Uint32Array(cap);
   const more = new Map();
-  const key = (a, b) => (a < b ? a * n + b : b * n + a);
-  let slots = 0;
+  const slotOf = (a, b) => {
+    const x = a < b ? a : b;
+    const y = a < b ? b : a;
+    let h = (Math.imul(x, 0x9e3779b1) ^ Math.imul(y, 0x85ebca77)) & mask;
+    while (lo[h] !== -1 && (lo[h] !== x || hi[h] !== y)) h = (h + 1) & mask;
+    if (lo[h] === -1) {
+      lo[h] = x;
+      hi[h] = y;
+    }
+    return h;
+  };
   for (let f = 0; f < t; f++) {
     for (let k = 0; k < 3; k++) {
-      const id = key(indices[3 * f + k], indices[3 * f + ((k + 1) % 3)]);
-      const slot = slotOf.get(id);
-      if (slot === undefined) {
-        slotOf.set(id, slots);
-        first[slots++] = f;
-      } else if (second[slot] < 0) {
-        second[slot] = f;
-      } else {
+      const slot = slotOf(indices[3 * f + k], indices[3 * f + ((k + 1) % 3)]);
+      const u = uses[slot]++;
+      if (u === 0) first[slot] = f;
+      else if (u === 1) second[slot] = f;
+      else {
         const l = more.get(slot);
         if (l) l.push(f);
         else more.set(slot, [f]);
       }
+    }
+  }
+  // Border vertices: the ends of edges used by exactly one triangle (decode.js borderVertices).
+  const border = new Uint8Array(n);
+  for (let h = 0; h < cap; h++) {
+    if (lo[h] !== -1 && uses[h] === 1) {
+      border[lo[h]] = 1;
+      border[hi[h]] = 1;
     }
   }
   // The third corner of triangle g opposite edge (x, y), if before v; else -1.
@@ -368,15 +388,17 @@ export function parallelograms(indices, n) {
     }
     return -1;
   };
-  const lists = new Array(n);
-  let total = 0;
+  // Per corner, its parallelogram's third vertex (or -1); counted per vertex, then laid out
+  // in triangle order.
+  const thirds = new Int32Array(3 * t).fill(-1);
+  const count = new Uint32Array(n + 1);
   for (let f = 0; f < t; f++) {
     for (let k = 0; k < 3; k++) {
       const v = indices[3 * f + k];
       const x = indices[3 * f + ((k + 1) % 3)];
       const y = indices[3 * f + ((k + 2) % 3)];
       if (x >= v || y >= v) continue;
-      const slot = slotOf.get(key(x, y));
+      const slot = slotOf(x, y);
       let third = first[slot] !== f ? thirdBefore(first[slot], x, y, v) : -1;
       if (third < 0 && second[slot] >= 0 && second[slot] !== f) third = thirdBefore(second[slot], x, y, v);
       if (third < 0 && more.has(slot)) {
@@ -387,22 +409,26 @@ export function parallelograms(indices, n) {
         }
       }
       if (third >= 0) {
-        (lists[v] ||= []).push(x, y, third);
-        total++;
+        thirds[3 * f + k] = third;
+        count[v + 1]++;
       }
     }
   }
   const start = new Uint32Array(n + 1);
+  for (let v = 0; v < n; v++) start[v + 1] = start[v] + count[v + 1];
+  const total = start[n];
   const triples = new Uint32Array(total * 3);
-  let at = 0;
-  for (let v = 0; v < n; v++) {
-    start[v] = at / 3;
-    const l = lists[v];
-    if (l) {
-      triples.set(l, at);
-      at += l.length;
-    }
+  const fill = start.slice(0, n);
+  for (let c = 0; c < 3 * t; c++) {
+    const third = thirds[c];
+    if (third < 0) continue;
+    const f = (c / 3) | 0;
+    const k = c - 3 * f;
+    const v = indices[c];
+    const at = 3 * fill[v]++;
+    triples[at] = indices[3 * f + ((k + 1) % 3)];
+    triples[at + 1] = indices[3 * f + ((k + 2) % 3)];
+    triples[at + 2] = third;
   }
-  start[n] = total;
-  return { start, triples };
+  return { start, triples, border };
 }
