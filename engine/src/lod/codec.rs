@@ -690,14 +690,18 @@ fn encode_split(
         })
     };
     let shift = patch.shift.min(MAX_SHIFT);
-    let border = border_vertices(&indices, used);
+    let multi = v3.then(|| Parallelograms::of(&indices, used));
+    let border = match &multi {
+        Some(m) => m.border.clone(),
+        None => border_vertices(&indices, used),
+    };
 
     // Positions (relative to the patch minimum) and ids, each from its prediction.
     let mut decoded_pos: Vec<[i64; 3]> = vec![[0; 3]; used];
     let mut id_values: Vec<[i64; 1]> = vec![[0]; used];
     let mut pos_sink = Sink::new(v3, POSITION_CHANNELS);
     let mut id_sink = Sink::new(v3, ID_CHANNELS);
-    let multi = v3.then(|| Parallelograms::of(&indices, used));
+
     for v in 0..used {
         let prediction = predictions[v];
         let actual: [i64; 3] = std::array::from_fn(|k| (grid[v][k] - min[k]) as i64);
@@ -1057,12 +1061,16 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         }
         (indices, sequence)
     };
-    let border = border_vertices(&indices, n);
+    let multi = v3.then(|| Parallelograms::of(&indices, n));
+    let border = match &multi {
+        Some(m) => m.border.clone(),
+        None => border_vertices(&indices, n),
+    };
     let mut pos: Vec<[i64; 3]> = vec![[0; 3]; n];
     let mut ids: Vec<[i64; 1]> = vec![[0]; n];
     let mut pos_src = Source::new(v3, pos_s, POSITION_CHANNELS);
     let mut ids_src = Source::new(v3, ids_s, ID_CHANNELS);
-    let multi = v3.then(|| Parallelograms::of(&indices, n));
+
     for &(v, prediction) in &sequence {
         let v = v as usize;
         let (guess, normal) = position_guess(multi.as_ref(), &pos, v, &prediction);

@@ -23,6 +23,9 @@ use super::frontcoder::Prediction;
 pub struct Parallelograms {
     start: Vec<u32>,
     triples: Vec<[u32; 3]>,
+    /// Vertices on an edge used by exactly one triangle (as `codec::border_vertices` finds
+    /// them), from the same edge table.
+    pub border: Vec<bool>,
 }
 
 impl Parallelograms {
@@ -32,46 +35,86 @@ impl Parallelograms {
     /// below `v`.
     pub fn of(indices: &[u32], n: usize) -> Self {
         let key = |a: u32, b: u32| ((a.min(b) as u64) << 32) | a.max(b) as u64;
-        // Undirected edge -> triangles using it, in order.
-        let mut on_edge: HashMap<u64, Vec<u32>> =
+        // Undirected edge -> slot; per slot its first two triangles in order, and further
+        // triangles of non-manifold edges in `more`.
+        let mut slot_of: HashMap<u64, u32> =
             HashMap::with_capacity_and_hasher(indices.len(), Default::default());
+        let mut first: Vec<u32> = Vec::with_capacity(indices.len());
+        let mut second: Vec<u32> = Vec::with_capacity(indices.len());
+        let mut more: HashMap<u32, Vec<u32>> = HashMap::default();
         for (f, t) in indices.chunks_exact(3).enumerate() {
             for k in 0..3 {
-                on_edge
-                    .entry(key(t[k], t[(k + 1) % 3]))
-                    .or_default()
-                    .push(f as u32);
+                let next = first.len() as u32;
+                let slot = *slot_of.entry(key(t[k], t[(k + 1) % 3])).or_insert(next);
+                if slot == next {
+                    first.push(f as u32);
+                    second.push(u32::MAX);
+                } else if second[slot as usize] == u32::MAX {
+                    second[slot as usize] = f as u32;
+                } else {
+                    more.entry(slot).or_default().push(f as u32);
+                }
             }
         }
-        let mut lists: Vec<Vec<[u32; 3]>> = vec![Vec::new(); n];
+        // Per corner, its parallelogram's third vertex (u32::MAX: none), counted per vertex.
+        let mut thirds = vec![u32::MAX; indices.len()];
+        let mut start = vec![0u32; n + 1];
         for (f, t) in indices.chunks_exact(3).enumerate() {
             for k in 0..3 {
                 let (v, x, y) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
-                if x >= v || y >= v {
+                if x >= v || y >= v || v as usize >= n {
                     continue;
                 }
-                let third = on_edge.get(&key(x, y)).and_then(|fs| {
-                    fs.iter()
-                        .filter(|&&g| g as usize != f)
-                        .filter_map(|&g| {
-                            let u = &indices[3 * g as usize..3 * g as usize + 3];
-                            u.iter().copied().find(|&o| o != x && o != y)
-                        })
-                        .find(|&o| o < v)
-                });
+                let Some(&slot) = slot_of.get(&key(x, y)) else {
+                    continue;
+                };
+                let slot = slot as usize;
+                let later = more.get(&(slot as u32)).map_or(&[][..], Vec::as_slice);
+                let third = [first[slot], second[slot]]
+                    .into_iter()
+                    .chain(later.iter().copied())
+                    .filter(|&g| g != u32::MAX && g as usize != f)
+                    .filter_map(|g| {
+                        let u = &indices[3 * g as usize..3 * g as usize + 3];
+                        u.iter().copied().find(|&o| o != x && o != y)
+                    })
+                    .find(|&o| o < v);
                 if let Some(o) = third {
-                    lists[v as usize].push([x, y, o]);
+                    thirds[3 * f + k] = o;
+                    start[v as usize + 1] += 1;
                 }
             }
         }
-        let mut start = Vec::with_capacity(n + 1);
-        let mut triples = Vec::new();
-        for l in lists {
-            start.push(triples.len() as u32);
-            triples.extend(l);
+        let mut border = vec![false; n];
+        for (&e, &slot) in &slot_of {
+            if second[slot as usize] == u32::MAX {
+                for end in [(e >> 32) as usize, (e & 0xFFFF_FFFF) as usize] {
+                    if let Some(b) = border.get_mut(end) {
+                        *b = true;
+                    }
+                }
+            }
         }
-        start.push(triples.len() as u32);
-        Parallelograms { start, triples }
+        for v in 0..n {
+            start[v + 1] += start[v];
+        }
+        let mut fill: Vec<u32> = start[..n].to_vec();
+        let mut triples = vec![[0u32; 3]; start[n] as usize];
+        for (c, &o) in thirds.iter().enumerate() {
+            if o == u32::MAX {
+                continue;
+            }
+            let (f, k) = (c / 3, c % 3);
+            let t = &indices[3 * f..3 * f + 3];
+            let v = t[k] as usize;
+            triples[fill[v] as usize] = [t[(k + 1) % 3], t[(k + 2) % 3], o];
+            fill[v] += 1;
+        }
+        Parallelograms {
+            start,
+            triples,
+            border,
+        }
     }
 
     /// The parallelograms of vertex `v`.
