@@ -58,6 +58,9 @@ export async function login(page, base, user) {
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
+/** Longest wait for one evaluation of `poll` before it is asked again. */
+const EVALUATE_STALL_MS = 15_000;
+
 /**
  * Polls `fn` in the page (page.evaluate, which the page's CSP allows, unlike string
  * predicates) until `accept(value)` holds in Node; returns the value. A navigation of the
@@ -68,11 +71,24 @@ export async function poll(page, fn, accept = Boolean, timeout = 60_000, arg = u
   let value;
   for (;;) {
     try {
-      value = await page.evaluate(fn, arg);
+      // An evaluation caught in a reload can also stall for good instead of failing (seen
+      // once: the upload test's zip case hung to its 10-minute timeout after its model was
+      // ready): it is abandoned after EVALUATE_STALL_MS and asked again, like a lost one.
+      let timer;
+      const stalled = new Promise((_, reject) => {
+        timer = setTimeout(() => reject(new Error('evaluation stalled')), Math.min(EVALUATE_STALL_MS, Math.max(end - Date.now(), 1000)));
+      });
+      const evaluation = page.evaluate(fn, arg);
+      evaluation.catch(() => {}); // an abandoned evaluation may still fail later
+      try {
+        value = await Promise.race([evaluation, stalled]);
+      } finally {
+        clearTimeout(timer);
+      }
     } catch (err) {
       // The page may navigate or reload itself (a model page does when its build ends):
       // the evaluation is lost with the old document and asked again of the new one.
-      if (!/Execution context was destroyed|because of a navigation/i.test(String(err && err.message)) || Date.now() > end) throw err;
+      if (!/Execution context was destroyed|because of a navigation|evaluation stalled/i.test(String(err && err.message)) || Date.now() > end) throw err;
       await sleep(100);
       continue;
     }
