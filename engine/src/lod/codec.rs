@@ -1196,6 +1196,19 @@ pub fn computed_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]
 mod tests {
     use super::*;
 
+    /// `patch` encoded in each layout (`MWP3`, then `MWP2`), each blob's magic checked.
+    fn in_both_layouts(patch: &PatchRef<'_>, zstd_level: i32) -> [Vec<u8>; 2] {
+        [Layout::Front, Layout::Meshopt].map(|layout| {
+            let (blob, _) = encode_layout(patch, zstd_level, layout);
+            let magic = match layout {
+                Layout::Front => BLOB_MAGIC,
+                Layout::Meshopt => BLOB_MAGIC_V2,
+            };
+            assert_eq!(blob[..4], magic);
+            blob
+        })
+    }
+
     #[allow(clippy::type_complexity)]
     fn sheet() -> (
         Grid,
@@ -1406,28 +1419,16 @@ mod tests {
     #[test]
     fn roundtrip_is_exact_at_full_precision() {
         let (grid, gp, ids, colors, normals, indices) = sheet();
-        for layout in [Layout::Front, Layout::Meshopt] {
-            let (blob, _) = encode_layout(
-                &PatchRef {
-                    grid_positions: &gp,
-                    colors: Some(&colors),
-                    normals: Some(&normals),
-                    original_ids: &ids,
-                    indices: &indices,
-                    shift: 0,
-                    texture: None,
-                },
-                3,
-                layout,
-            );
-            assert_eq!(
-                &blob[..4],
-                if layout == Layout::Front {
-                    &BLOB_MAGIC
-                } else {
-                    &BLOB_MAGIC_V2
-                }
-            );
+        let patch = PatchRef {
+            grid_positions: &gp,
+            colors: Some(&colors),
+            normals: Some(&normals),
+            original_ids: &ids,
+            indices: &indices,
+            shift: 0,
+            texture: None,
+        };
+        for blob in in_both_layouts(&patch, 3) {
             let p = decode(&blob, &grid).expect("decodes");
             let before = canon(
                 indices
@@ -1469,28 +1470,16 @@ mod tests {
     fn coarse_interior_moves_at_most_half_a_coarse_step_and_border_is_exact() {
         let (grid, gp, ids, _, _, indices) = sheet();
         let shift = 4;
-        for layout in [Layout::Front, Layout::Meshopt] {
-            let (blob, _) = encode_layout(
-                &PatchRef {
-                    grid_positions: &gp,
-                    colors: None,
-                    normals: None,
-                    original_ids: &ids,
-                    indices: &indices,
-                    shift,
-                    texture: None,
-                },
-                3,
-                layout,
-            );
-            assert_eq!(
-                &blob[..4],
-                if layout == Layout::Front {
-                    &BLOB_MAGIC
-                } else {
-                    &BLOB_MAGIC_V2
-                }
-            );
+        let patch = PatchRef {
+            grid_positions: &gp,
+            colors: None,
+            normals: None,
+            original_ids: &ids,
+            indices: &indices,
+            shift,
+            texture: None,
+        };
+        for blob in in_both_layouts(&patch, 3) {
             let p = decode(&blob, &grid).expect("decodes");
             let border = border_vertices(&p.indices, p.positions.len());
             for (i, id) in p.original_ids.iter().enumerate() {
@@ -1536,28 +1525,16 @@ mod tests {
         assert!(decode(b"", &grid).is_err());
         assert!(decode(b"MWP2\x01\0\0\0\xff\xff\xff\x00garbage", &grid).is_err());
         let (_, gp, ids, colors, normals, indices) = sheet();
-        for layout in [Layout::Front, Layout::Meshopt] {
-            let (blob, _) = encode_layout(
-                &PatchRef {
-                    grid_positions: &gp,
-                    colors: Some(&colors),
-                    normals: Some(&normals),
-                    original_ids: &ids,
-                    indices: &indices,
-                    shift: 2,
-                    texture: None,
-                },
-                0,
-                layout,
-            );
-            assert_eq!(
-                &blob[..4],
-                if layout == Layout::Front {
-                    &BLOB_MAGIC
-                } else {
-                    &BLOB_MAGIC_V2
-                }
-            );
+        let patch = PatchRef {
+            grid_positions: &gp,
+            colors: Some(&colors),
+            normals: Some(&normals),
+            original_ids: &ids,
+            indices: &indices,
+            shift: 2,
+            texture: None,
+        };
+        for blob in in_both_layouts(&patch, 0) {
             for cut in (0..blob.len()).step_by(7) {
                 let _ = decode(&blob[..cut], &grid);
             }
