@@ -50,10 +50,6 @@ impl Sums {
 /// A blob re-encoded in the `MWP2` layout (same vertices, ids, precision and attributes).
 fn as_v2(blob: &[u8], grid: &codec::Grid, level: i32) -> Result<Vec<u8>> {
     let p = codec::decode(blob, grid)?;
-    let (_, payload) = codec::blob_bytes(blob)?;
-    let shift = payload
-        .get(12..16)
-        .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
     let corner_uvs: Vec<[f32; 2]> = p
         .indices
         .iter()
@@ -70,7 +66,7 @@ fn as_v2(blob: &[u8], grid: &codec::Grid, level: i32) -> Result<Vec<u8>> {
         normals: (!p.normals.is_empty()).then_some(p.normals.as_slice()),
         original_ids: &p.original_ids,
         indices: &p.indices,
-        shift,
+        shift: p.shift,
         texture,
     };
     Ok(codec::encode_layout(&patch, level, Layout::Meshopt).0)

@@ -1,16 +1,22 @@
-//! Patch blob codec (layout in `docs/FORMAT.md`).
+//! Patch blob codec (layout in `docs/FORMAT.md`), in two layouts: `MWP3`, which builds write,
+//! and the older `MWP2`, still read.
 //!
-//! - Connectivity: meshoptimizer's index codec, vertices in first-use order.
-//! - Positions on the model-wide integer grid and original vertex IDs: parallelogram
-//!   prediction along the triangle order (Touma–Gotsman), zigzag LEB128 residuals. Vertices
-//!   on the patch border keep full grid precision, so a vertex shared by two patches (possibly
-//!   at different levels) decodes to identical coordinates and cuts stay watertight; interior
-//!   vertices of coarse patches are stored at a coarser step (`2^shift` grid units) chosen
-//!   from the node's error, as Nexus quantises by a fraction of the node error.
-//! - Colours: YCoCg with 6 bits (meshoptimizer's colour filter + vertex codec; a predicted
-//!   scheme was measured and saved only ~3%). Decoded by [`decode_ycocg`] in exact integer
-//!   arithmetic: meshoptimizer's own SIMD decoder uses an approximate reciprocal, so its
-//!   results differ by one between platforms and decoders.
+//! - Connectivity: `MWP3` a front-based traversal coder ([`super::frontcoder`]), vertices in
+//!   traversal order; `MWP2` meshoptimizer's index codec, vertices in first-use order.
+//! - Positions on the model-wide integer grid and original vertex IDs: predicted by
+//!   parallelograms (Touma–Gotsman): `MWP3` by the multi-way prediction of
+//!   [`super::parallelogram`] (ids by a median-edge rule), residuals range-coded in channels
+//!   ([`super::rangecoder`]); `MWP2` by the one parallelogram along the triangle order,
+//!   zigzag LEB128 residuals. Vertices on the patch border keep full grid precision, so a
+//!   vertex shared by two patches (possibly at different levels) decodes to identical
+//!   coordinates and cuts stay watertight; interior vertices of coarse patches are stored at a
+//!   coarser step (`2^shift` grid units) chosen from the node's error, as Nexus quantises by a
+//!   fraction of the node error.
+//! - Colours: YCoCg with 6 bits (meshoptimizer's colour filter); `MWP3` predicts its bytes
+//!   from the vertex's earlier neighbours and range-codes them, `MWP2` uses meshoptimizer's
+//!   vertex codec. Decoded by [`decode_ycocg`] in exact integer arithmetic: meshoptimizer's own
+//!   SIMD decoder uses an approximate reciprocal, so its results differ by one between
+//!   platforms and decoders.
 //! - Normals: the decoder computes every normal from the patch's triangles (area-weighted,
 //!   exactly in f64 from the integer grid coordinates, so every decoder in every language
 //!   gets the same bits); border vertices additionally store the difference between their
@@ -22,7 +28,9 @@
 //!   count as patch border, so they keep full precision and stored normals and decode to the
 //!   same point). Coordinates are u16 pairs through meshoptimizer's vertex codec; the atlas
 //!   image (JPEG) travels in front of the compressed payload, as it is compressed already.
-//! - The whole payload is compressed with zstd.
+//! - The payload is compressed with zstd when that makes it smaller: range-coded streams
+//!   rarely gain, so `MWP3` payloads without meshoptimizer streams are mostly stored as they
+//!   are.
 
 use meshopt::{
     decode_index_buffer, decode_vertex_buffer, encode_index_buffer, encode_vertex_buffer,
@@ -34,8 +42,8 @@ use super::parallelogram::{Parallelograms, predict};
 use super::patch::{EdgeUses, edge_ends};
 use super::rangecoder::{self, Channel};
 
-/// Blob magic, first 4 bytes: front-coded connectivity and range-coded positions, ids and
-/// normals.
+/// Blob magic, first 4 bytes: front-coded connectivity and range-coded positions, ids,
+/// colours and normals.
 pub const BLOB_MAGIC: [u8; 4] = *b"MWP3";
 /// The older layout (meshoptimizer's index codec, varint residuals), still read, and written
 /// for patches the front coder refuses (a triangle repeating a corner).
@@ -211,6 +219,8 @@ pub struct Patch {
     pub normals: Vec<[f32; 3]>,
     pub original_ids: Vec<u32>,
     pub indices: Vec<u32>,
+    /// Interior vertices are at `2^shift` grid units (0 = full precision; the payload's).
+    pub shift: u32,
     /// Grid coordinates of the vertices (exact; `positions` are their world values).
     pub grid_positions: Vec<[u32; 3]>,
     /// Texture coordinates in [`Patch::image`] (empty when the patch has no texture): `v = 0`
@@ -691,9 +701,13 @@ fn encode_split(
     };
     let shift = patch.shift.min(MAX_SHIFT);
     let multi = v3.then(|| Parallelograms::of(&indices, used));
-    let border = match &multi {
-        Some(m) => m.border.clone(),
-        None => border_vertices(&indices, used),
+    let walked_border;
+    let border: &[bool] = match &multi {
+        Some(m) => &m.border,
+        None => {
+            walked_border = border_vertices(&indices, used);
+            &walked_border
+        }
     };
 
     // Positions (relative to the patch minimum) and ids, each from its prediction.
@@ -1062,9 +1076,13 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         (indices, sequence)
     };
     let multi = v3.then(|| Parallelograms::of(&indices, n));
-    let border = match &multi {
-        Some(m) => m.border.clone(),
-        None => border_vertices(&indices, n),
+    let walked_border;
+    let border: &[bool] = match &multi {
+        Some(m) => &m.border,
+        None => {
+            walked_border = border_vertices(&indices, n);
+            &walked_border
+        }
     };
     let mut pos: Vec<[i64; 3]> = vec![[0; 3]; n];
     let mut ids: Vec<[i64; 1]> = vec![[0]; n];
@@ -1155,6 +1173,7 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         normals,
         original_ids,
         indices,
+        shift,
         grid_positions,
         uvs,
         image,

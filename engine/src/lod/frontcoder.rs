@@ -212,6 +212,21 @@ impl Contexts {
             index: Channel::new(),
         }
     }
+
+    /// Codes the known vertex `v` of `known` ones, counted back from the newest.
+    fn put_index(&mut self, enc: &mut Encoder, known: usize, v: u32) {
+        self.index.put(enc, known as i64 - 1 - v as i64);
+    }
+
+    /// [`Contexts::put_index`]'s vertex; an error unless it is one of the `known`.
+    fn get_index(&mut self, dec: &mut Decoder<'_>, known: usize) -> Result<u32, FrontError> {
+        let back = self.index.get(dec).ok_or(FrontError)?;
+        let v = known as i64 - 1 - back;
+        if back < 0 || v < 0 {
+            return Err(FrontError);
+        }
+        Ok(v as u32)
+    }
 }
 
 /// The prediction of the `k`-th corner of a start triangle whose earlier corners are `t`.
@@ -275,8 +290,7 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
                 predictions.push(prediction);
             } else {
                 enc.bit(&mut ctx.old, true);
-                ctx.index
-                    .put(&mut enc, order.len() as i64 - 1 - new_of[v] as i64);
+                ctx.put_index(&mut enc, order.len(), new_of[v]);
             }
             s[k] = new_of[v];
         }
@@ -323,25 +337,8 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
                 };
             }
             ctx.symbols.put(&mut enc, front.context(e), symbol);
-            if symbol == SPLIT && std::env::var_os("FRONT_DEBUG").is_some() {
-                let mut found = 999i32;
-                let (mut x, mut y) = (e, e);
-                for step in 1..200 {
-                    x = front.next[x as usize];
-                    y = front.prev[y as usize];
-                    if front.a[x as usize] == c {
-                        found = step;
-                        break;
-                    }
-                    if front.a[y as usize] == c {
-                        found = -step;
-                        break;
-                    }
-                }
-                eprintln!("SPLIT {found} {}", order.len() as i64 - 1 - c as i64);
-            }
             if symbol == SPLIT {
-                ctx.index.put(&mut enc, order.len() as i64 - 1 - c as i64);
+                ctx.put_index(&mut enc, order.len(), c);
             }
             let tri = front.apply(e, symbol, c);
             front.emit(tri, &mut out);
@@ -362,20 +359,11 @@ pub fn decode(bytes: &[u8], n: usize, t: usize) -> Result<(Vec<u32>, Vec<Predict
     let mut front = Front::new(n);
     let mut out: Vec<u32> = Vec::with_capacity(3 * t);
     let mut predictions: Vec<Prediction> = Vec::with_capacity(n);
-    let index =
-        |dec: &mut Decoder<'_>, ch: &mut Channel, known: usize| -> Result<u32, FrontError> {
-            let back = ch.get(dec).ok_or(FrontError)?;
-            let v = known as i64 - 1 - back;
-            if back < 0 || v < 0 {
-                return Err(FrontError);
-            }
-            Ok(v as u32)
-        };
     while out.len() < 3 * t {
         let mut s = [0u32; 3];
         for k in 0..3 {
             if dec.bit(&mut ctx.old) {
-                s[k] = index(&mut dec, &mut ctx.index, predictions.len())?;
+                s[k] = ctx.get_index(&mut dec, predictions.len())?;
             } else {
                 if predictions.len() >= n {
                     return Err(FrontError);
@@ -425,7 +413,7 @@ pub fn decode(bytes: &[u8], n: usize, t: usize) -> Result<(Vec<u32>, Vec<Predict
                     c
                 }
                 SPLIT => {
-                    let c = index(&mut dec, &mut ctx.index, predictions.len())?;
+                    let c = ctx.get_index(&mut dec, predictions.len())?;
                     if c == front.a[ei] || c == front.b[ei] {
                         return Err(FrontError);
                     }

@@ -1,5 +1,5 @@
-//! Multi-way parallelogram prediction of `MWP3` positions and ids (`docs/FORMAT.md`
-//! "Prediction"), after Cohen-Or et al.'s multi-way prediction and Draco's
+//! Multi-way parallelogram prediction of `MWP3` positions, ids and colours
+//! (`docs/FORMAT.md` "Prediction"), after Cohen-Or et al.'s multi-way prediction and Draco's
 //! `MESH_PREDICTION_MULTI_PARALLELOGRAM`.
 //!
 //! The connectivity is decoded before any position ([`super::frontcoder`]), so a vertex `v`
@@ -12,8 +12,10 @@
 //! where the parallelogram overshoots). On the dragon, 5% fewer position bytes and 3% fewer
 //! id bytes than the introducing triangle's parallelogram alone.
 //!
-//! Vertices without any such triangle keep their traversal prediction (a start triangle's
-//! corners).
+//! Colours take the mean over the same triangles' `x` and `y` corners (the vertex's earlier
+//! neighbours). Vertices without any such triangle keep their traversal prediction (a start
+//! triangle's corners). The edge table also gives the patch's border vertices, so a decoder
+//! need not build a second one.
 
 use rustc_hash::FxHashMap as HashMap;
 
@@ -159,9 +161,7 @@ impl Parallelograms {
         values.sort_unstable();
         values[values.len() / 2]
     }
-}
 
-impl Parallelograms {
     /// The prediction of `v`'s colour (`MWP3`, the four bytes of meshoptimizer's YCoCg
     /// filter, the chroma ones signed): the floored mean over its parallelograms' `x` and `y`
     /// corners, its earlier neighbours (colour varies too irregularly for parallelograms);

@@ -2,10 +2,11 @@
 //! `docs/FORMAT.md` "Range coding").
 //!
 //! The binary coder is LZMA's (Igor Pavlov; the same arithmetic as in the LZMA SDK's
-//! `LzmaEnc.c`/`LzmaDec.c`): 11-bit probabilities adapted by a shift of 5, a 32-bit range
-//! renormalised bytewise below 2^24, carries propagated through a cached byte. Every step is
-//! an integer operation on values below 2^32, so the browser's decoder
-//! (`static/js/lod/rangecoder.js`) gets the same bits with doubles.
+//! `LzmaEnc.c`/`LzmaDec.c`): a 32-bit range renormalised bytewise below 2^24, carries
+//! propagated through a cached byte; its probabilities here have 15 bits and adapt at a rate
+//! that slows as they learn ([`Bit`]). Every step is an integer operation on values below
+//! 2^32, so the browser's decoder (`static/js/lod/rangecoder.js`) gets the same bits with
+//! doubles.
 //!
 //! Residuals (signed integers) are zigzag-mapped, then coded as Elias-gamma-like pairs, as
 //! LZMA codes match distances and Draco its prediction residuals: the bit length `k` through a
@@ -44,7 +45,7 @@ impl Default for Bit {
 impl Bit {
     fn rate(&self) -> u32 {
         // 1 + the bit length of seen + 2, capped.
-        (1 + (8 - (self.seen as u32 + 2).leading_zeros().saturating_sub(24))).min(MAX_RATE as u32)
+        (1 + u32::BITS - (self.seen as u32 + 2).leading_zeros()).min(MAX_RATE as u32)
     }
 
     fn update(&mut self, bit: bool) {
@@ -58,6 +59,8 @@ impl Bit {
         self.seen = self.seen.saturating_add(1);
     }
 }
+
+/// Renormalise below this range.
 const TOP: u32 = 1 << 24;
 /// Largest bit length of a zigzag-mapped residual a decoder accepts: grid coordinates and ids
 /// are below 2^32, so valid residuals (a + b - c of them) stay below 2^34.

@@ -7,8 +7,9 @@
 // Normals: every vertex gets the area-weighted normal of the integer grid positions (f64,
 // exact); border vertices add a stored octahedral residual (8 bits) to that prediction.
 // Layouts: `MWP3` blobs (what builds write) have front-coded connectivity and range-coded
-// positions, ids and normals predicted by multi-way parallelograms (./rangecoder.js);
-// `MWP2` blobs (older files) meshoptimizer's index codec and varint residuals.
+// positions, ids, colours and normals, predicted by multi-way parallelograms
+// (./rangecoder.js); `MWP2` blobs (older files) meshoptimizer's index and vertex codecs and
+// varint residuals.
 // Textures (docs/FORMAT.md "Patch blob", "Textures"): a textured blob carries its atlas (a
 // JPEG) in an image section before the payload, and the payload a sixth stream of u16 texture
 // coordinates; vertices where the atlas' charts meet come once per chart (same original id,
@@ -20,6 +21,7 @@ const MAGIC = [0x4d, 0x57, 0x50]; // "MWP", then '2' or '3' (the layout version)
 const POSITION_CHANNELS = 16;
 const ID_CHANNELS = 2;
 const NORMAL_CHANNELS = 2;
+const COLOUR_CHANNELS = 4;
 const COMPRESSION_NONE = 0;
 const COMPRESSION_ZSTD = 1;
 const FLAG_COLORS = 1;
@@ -411,18 +413,19 @@ function decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids) {
  */
 function decodeColours(conn, multi, n, colS, out) {
   const { kind, pa, pb } = conn;
-  const source = residualSource(colS, 4, 'colors');
+  const source = residualSource(colS, COLOUR_CHANNELS, 'colors');
   const values = new Float64Array(n * 4);
   const sum = [0, 0, 0, 0];
+  let m = 0;
+  const add = (u) => {
+    for (let k = 0; k < 4; k++) sum[k] += values[u * 4 + k];
+    m++;
+  };
   for (let v = 0; v < n; v++) {
     const from = multi.start[v];
     const to = multi.start[v + 1];
     sum.fill(0);
-    let m = 0;
-    const add = (u) => {
-      for (let k = 0; k < 4; k++) sum[k] += values[u * 4 + k];
-      m++;
-    };
+    m = 0;
     if (to > from) {
       for (let j = from; j < to; j++) {
         add(multi.triples[3 * j]);
