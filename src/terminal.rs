@@ -105,6 +105,20 @@ pub fn print_summary(report: &BuildReport) {
         mb(report.output_bytes),
         report.output_bytes as f64 / (i.triangles.max(1)) as f64
     );
+    if let Some(t) = &report.textures {
+        let all = t.featured.plus(&t.plain);
+        println!(
+            "  atlases      {} JPEGs, {:.2} MB for {:.1} M texels, quality {}–{} (mean {:.1}; \
+             {} of them richer in features than their level's mean)",
+            all.fragments,
+            mb(all.jpeg_bytes),
+            all.covered_texels as f64 / 1e6,
+            t.quality.0,
+            t.quality.2,
+            t.quality.1,
+            t.featured.fragments
+        );
+    }
 }
 
 /// Logs to standard error, filtered by `MESHWIKI_LOG` (default `info`, quiet sqlx queries),

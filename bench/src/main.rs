@@ -11,6 +11,7 @@ mod render;
 mod search;
 mod select;
 mod simplify;
+mod textures;
 mod untar;
 
 use std::path::PathBuf;
@@ -52,6 +53,9 @@ enum Command {
     /// Quadric collapses against the mesh-segmentation paper's segment-driven simplification
     /// on real scans: distance at equal triangles, triangles at equal distance.
     Simplify(simplify::Args),
+    /// Textured scans: fragment JPEG quality by feature density against uniform quality at
+    /// equal bytes (texel PSNR of featured and plain fragments).
+    Textures(textures::Args),
 }
 
 /// The data directory.
@@ -110,5 +114,6 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Select(args) => tokio::task::spawn_blocking(move || select::run(args)).await?,
         Command::Simplify(args) => tokio::task::spawn_blocking(move || simplify::run(args)).await?,
+        Command::Textures(args) => tokio::task::spawn_blocking(move || textures::run(args)).await?,
     }
 }

@@ -12,49 +12,12 @@ use common::psnr;
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{self, BuildOptions, LodFile};
-use meshwiki_engine::mesh::{
-    self, ImportError, Mesh, MeshSink, NO_TEXTURE, SourceInfo, SourceTexture, TexturedFace,
-    VertexBatch, encode_rgba,
-};
+use meshwiki_engine::mesh::{self, MeshSink, NO_TEXTURE, TexturedMesh, encode_rgba};
 use meshwiki_engine::progress::NoProgress;
 use meshwiki_engine::render::{
     AdapterChoice, Cut, GpuDevice, Outputs, RenderModel, RenderOptions, Renderer, RendererOptions,
 };
 use std::path::{Path, PathBuf};
-
-/// A mesh with what the reader handed over of its textures.
-#[derive(Default)]
-struct Textured {
-    mesh: Mesh,
-    faces: Vec<TexturedFace>,
-    textures: Vec<SourceTexture>,
-}
-
-impl MeshSink for Textured {
-    fn begin(&mut self, info: &SourceInfo) -> Result<(), ImportError> {
-        self.mesh.begin(info)
-    }
-    fn vertices(&mut self, batch: VertexBatch<'_>) -> Result<(), ImportError> {
-        self.mesh.vertices(batch)
-    }
-    fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
-        self.faces
-            .extend(std::iter::repeat_n(TexturedFace::NONE, triangles.len()));
-        self.mesh.triangles(triangles)
-    }
-    fn texture(&mut self, texture: SourceTexture) -> Result<(), ImportError> {
-        self.textures.push(texture);
-        Ok(())
-    }
-    fn textured_triangles(
-        &mut self,
-        triangles: &[[u32; 3]],
-        faces: &[TexturedFace],
-    ) -> Result<(), ImportError> {
-        self.faces.extend_from_slice(faces);
-        self.mesh.triangles(triangles)
-    }
-}
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("mw-texture-{}-{name}", std::process::id()));
@@ -100,7 +63,7 @@ fn write_textured_obj(dir: &Path) -> PathBuf {
 fn obj_textures_reach_the_sink_and_every_patch_gets_an_atlas() {
     let dir = temp_dir("obj");
     let path = write_textured_obj(&dir);
-    let mut sink = Textured::default();
+    let mut sink = TexturedMesh::default();
     let stats = mesh::import(&path, &mut sink, &NoProgress).expect("import");
     assert_eq!(stats.textures, 1);
     assert_eq!(sink.textures.len(), 1);
@@ -156,18 +119,109 @@ fn obj_textures_reach_the_sink_and_every_patch_gets_an_atlas() {
     }
 }
 
+/// Fragment quality by feature density (issue 11, item 3): on the generated textured relief,
+/// the same fragments are featured or plain in every build; with a spread, the featured ones
+/// get higher JPEG quality (closer to their raw atlases) and the plain ones cost fewer bytes
+/// than at uniform quality; every patch still decodes with a valid atlas.
+#[test]
+fn fragment_quality_follows_feature_density() {
+    let dir = temp_dir("fragments");
+    let relief = mesh::Relief::new(60_000, mesh::synth::DEFAULT_SEED);
+    let build = |spread: u8| {
+        let out = dir.join(format!("relief-{spread}.mwlod"));
+        let options = BuildOptions {
+            max_patch_triangles: 2048,
+            memory_budget: 128 << 20,
+            threads: Some(2),
+            texture_quality: 70,
+            texture_spread: spread,
+            measure_textures: true,
+            ..Default::default()
+        };
+        let report = lod::build_from(
+            |sink: &mut dyn MeshSink| {
+                relief.stream_textured(769, sink)?;
+                Ok(relief.stats(true))
+            },
+            &out,
+            &options,
+            &NoProgress,
+        )
+        .expect("build");
+        (
+            out,
+            report
+                .textures
+                .expect("a textured build reports its atlases"),
+        )
+    };
+    let (_, uniform) = build(0);
+    let (out, by_features) = build(30);
+    assert_eq!(uniform.quality, (70, 70.0, 70));
+    let (lo, mean, hi) = by_features.quality;
+    assert!(
+        lo < 70 && hi > 70 && (mean - 70.0).abs() < 3.0,
+        "{:?}",
+        by_features.quality
+    );
+    for (u, f) in [
+        (uniform.featured, by_features.featured),
+        (uniform.plain, by_features.plain),
+    ] {
+        assert_eq!(u.fragments, f.fragments);
+        assert_eq!(u.covered_texels, f.covered_texels);
+        assert!(u.fragments > 0 && u.samples == 3 * u.covered_texels);
+    }
+    let (uf, ff) = (uniform.featured, by_features.featured);
+    let (up, fp) = (uniform.plain, by_features.plain);
+    assert!(
+        ff.psnr() > uf.psnr() + 0.2,
+        "featured: {:.2} vs {:.2} dB",
+        ff.psnr(),
+        uf.psnr()
+    );
+    assert!(ff.jpeg_bytes > uf.jpeg_bytes);
+    assert!(
+        fp.psnr() < up.psnr(),
+        "plain: {:.2} vs {:.2} dB",
+        fp.psnr(),
+        up.psnr()
+    );
+    assert!(fp.jpeg_bytes < up.jpeg_bytes);
+    eprintln!(
+        "featured fragments {:.2} -> {:.2} dB, plain {:.2} -> {:.2} dB; bytes {} -> {}",
+        uf.psnr(),
+        ff.psnr(),
+        up.psnr(),
+        fp.psnr(),
+        uf.jpeg_bytes + up.jpeg_bytes,
+        ff.jpeg_bytes + fp.jpeg_bytes
+    );
+    // The JPEGs went into the blobs: every patch decodes with its atlas.
+    let lod = LodFile::open(&out).expect("open");
+    let mut bytes = 0u64;
+    for node in 0..lod.nodes().len() as u32 {
+        let p = lod.patch(node).expect("decodes");
+        let img = p.image.as_deref().expect("every patch has an atlas");
+        mesh::Texture::decode(img).expect("the atlas is an image");
+        bytes += img.len() as u64;
+    }
+    assert_eq!(bytes, ff.jpeg_bytes + fp.jpeg_bytes);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_missing_texture_is_a_documented_fallback_not_an_error() {
     let dir = temp_dir("missing");
     let path = write_textured_obj(&dir);
     std::fs::remove_file(dir.join("checker.png")).expect("remove");
-    let mut sink = Textured::default();
+    let mut sink = TexturedMesh::default();
     let stats = mesh::import(&path, &mut sink, &NoProgress).expect("import without texture");
     assert_eq!(stats.textures, 0);
     assert!(sink.textures.is_empty());
     // A corrupt image is ignored the same way.
     std::fs::write(dir.join("checker.png"), b"\x89PNG\r\n\x1a\nnot really").expect("write");
-    let stats = mesh::import(&path, &mut Textured::default(), &NoProgress).expect("import");
+    let stats = mesh::import(&path, &mut TexturedMesh::default(), &NoProgress).expect("import");
     assert_eq!(stats.textures, 0);
     let out = dir.join("plain.mwlod");
     lod::build_file(&path, &out, &BuildOptions::default(), &NoProgress).expect("build");
@@ -188,7 +242,7 @@ fn bali() -> Option<PathBuf> {
 
 /// Reference: the source mesh rasterised with its own texture (perspective-correct texture
 /// coordinates, bilinear in linear light, unlit), pixel centres, nearest depth wins.
-fn reference(src: &Textured, cam: &Camera) -> Vec<[u8; 4]> {
+fn reference(src: &TexturedMesh, cam: &Camera) -> Vec<[u8; 4]> {
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut depth = vec![f32::INFINITY; w * h];
     let mut out = vec![[0u8, 0, 0, 255]; w * h];
@@ -249,7 +303,7 @@ fn reference(src: &Textured, cam: &Camera) -> Vec<[u8; 4]> {
 #[test]
 fn bali_mask_close_up_at_one_pixel_matches_the_source_texture() {
     let Some(path) = bali() else { return };
-    let mut src = Textured::default();
+    let mut src = TexturedMesh::default();
     mesh::import(&path, &mut src, &NoProgress).expect("import");
     assert_eq!(src.textures.len(), 1);
     assert!(src.faces.iter().all(|f| f.texture == 0));

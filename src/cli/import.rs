@@ -45,6 +45,14 @@ pub struct Args {
     /// simplify` compares the two).
     #[arg(long)]
     pub simplifier: Option<Simplifier>,
+    /// JPEG quality of a textured scan's atlases: the mean over each level's (default 85).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub texture_quality: Option<u8>,
+    /// How far an atlas' JPEG quality moves with the density of surface and texture features
+    /// of its patch (the TexMesh paper's ΔQ; 0: every atlas the same quality; default 10;
+    /// `meshwiki-bench textures` compares them at equal bytes).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=100))]
+    pub texture_spread: Option<u8>,
     /// Account that owns the model (default: the first admin).
     #[arg(long)]
     pub owner: Option<String>,
@@ -110,6 +118,8 @@ async fn import(db: &Db, settings: Settings, args: &Args, bytes: u64) -> anyhow:
             max_patch_triangles: Some(args.max_patch_triangles),
             threads: args.threads,
             simplifier: args.simplifier,
+            texture_quality: args.texture_quality,
+            texture_spread: args.texture_spread,
             ..JobOptions::default()
         },
         running_pid: Some(std::process::id() as i64),

@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::{self, BuildOptions};
-use meshwiki_engine::mesh::{ImportStats, synth};
+use meshwiki_engine::mesh::synth;
 use meshwiki_engine::progress::NoProgress;
 use meshwiki_engine::render::{AdapterChoice, RenderModel, Renderer, RendererOptions};
 
@@ -39,12 +39,7 @@ pub fn run(args: &Args) -> Result<()> {
     let dir = tempfile_dir()?;
     let out = dir.0.join("check.mwlod");
     let relief = synth::Relief::new(20_000, synth::DEFAULT_SEED);
-    let stats = ImportStats {
-        vertices: relief.vertex_count(),
-        triangles: relief.triangle_count(),
-        has_colors: true,
-        ..Default::default()
-    };
+    let stats = relief.stats(false);
     let options = BuildOptions {
         scratch_dir: Some(dir.0.clone()),
         ..BuildOptions::default()

@@ -29,7 +29,8 @@ use std::time::Duration;
 
 use meshwiki_engine::lod::{BuildError, BuildOptions, BuildReport, LodFile, build_from};
 use meshwiki_engine::mesh::{
-    ImportError, ImportErrorKind, ImportStats, MeshSink, SourceInfo, VertexBatch, synth,
+    ImportError, ImportErrorKind, MeshSink, SourceInfo, SourceTexture, TexturedFace, VertexBatch,
+    synth,
 };
 use meshwiki_engine::progress::Progress;
 use serde::Serialize;
@@ -256,12 +257,7 @@ pub fn run_build(
         )?,
         Source::Demo(triangles) => {
             let relief = synth::Relief::new(*triangles, synth::DEFAULT_SEED);
-            let stats = ImportStats {
-                vertices: relief.vertex_count(),
-                triangles: relief.triangle_count(),
-                has_colors: true,
-                ..ImportStats::default()
-            };
+            let stats = relief.stats(false);
             build_from(
                 |sink| {
                     progress.stage(progress::GENERATE_STAGE, relief.triangle_count());
@@ -317,8 +313,31 @@ impl MeshSink for InputSink<'_> {
     }
 
     fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
+        self.counted(triangles.len())?;
+        self.sink.triangles(triangles)
+    }
+
+    // Textured scans: the textures and the corners' coordinates go on to the build (without
+    // these two, the defaults dropped them and every upload built with vertex colours only).
+    fn texture(&mut self, texture: SourceTexture) -> Result<(), ImportError> {
+        self.sink.texture(texture)
+    }
+
+    fn textured_triangles(
+        &mut self,
+        triangles: &[[u32; 3]],
+        faces: &[TexturedFace],
+    ) -> Result<(), ImportError> {
+        self.counted(triangles.len())?;
+        self.sink.textured_triangles(triangles, faces)
+    }
+}
+
+impl InputSink<'_> {
+    /// Counts generated triangles (demo jobs) and stops when the job is cancelled.
+    fn counted(&mut self, triangles: usize) -> Result<(), ImportError> {
         if !self.count {
-            return self.sink.triangles(triangles);
+            return Ok(());
         }
         if self.progress.cancelled() {
             return Err(ImportError::new(
@@ -327,8 +346,8 @@ impl MeshSink for InputSink<'_> {
                 ImportErrorKind::Cancelled,
             ));
         }
-        self.progress.advance(triangles.len() as u64);
-        self.sink.triangles(triangles)
+        self.progress.advance(triangles as u64);
+        Ok(())
     }
 }
 
@@ -677,6 +696,7 @@ impl Jobs {
 
     fn build_options(&self, job: &Job) -> BuildOptions {
         let b = &self.inner.settings.build;
+        let d = BuildOptions::default();
         BuildOptions {
             max_patch_triangles: job
                 .options
@@ -689,7 +709,15 @@ impl Jobs {
                 .min(usize::MAX as u64) as usize,
             threads: job.options.threads.map(|t| t as usize).or(b.threads),
             simplifier: job.options.simplifier.unwrap_or_default(),
-            ..BuildOptions::default()
+            texture_quality: job
+                .options
+                .texture_quality
+                .map_or(d.texture_quality, |q| q.clamp(1, 100)),
+            texture_spread: job
+                .options
+                .texture_spread
+                .map_or(d.texture_spread, |s| s.min(100)),
+            ..d
         }
     }
 

@@ -97,8 +97,10 @@ pub fn percent(stage: &str, fraction: f64) -> f64 {
     {
         let at = |k: i32| 70.0 + 22.0 * (1.0 - 0.5f64.powi(k.max(0)));
         (at(level - 1), at(level))
+    } else if stage == meshwiki_engine::lod::build::ATLAS_STAGE {
+        (92.0, 95.0)
     } else if stage == "writing" {
-        (92.0, 98.0)
+        (95.0, 98.0)
     } else if stage == THUMBNAIL_STAGE {
         (98.0, 100.0)
     } else if stage == LUMIGRAPH_STAGE {
@@ -146,6 +148,7 @@ mod tests {
             "simplifying level 1",
             "simplifying level 2",
             "simplifying level 3",
+            meshwiki_engine::lod::build::ATLAS_STAGE,
             "writing",
             THUMBNAIL_STAGE,
         ];

@@ -101,6 +101,13 @@ pub struct JobOptions {
     /// `meshwiki-bench simplify`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simplifier: Option<Simplifier>,
+    /// JPEG quality (1–100) of textured scans' atlases, the mean of each level's (default 85).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture_quality: Option<u8>,
+    /// How far an atlas' quality moves with the feature density of its patch (the TexMesh
+    /// paper's ΔQ; 0: uniform quality; default 10).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture_spread: Option<u8>,
     /// Triangles of the generated relief (demo jobs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub triangles: Option<u64>,

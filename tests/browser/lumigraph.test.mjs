@@ -14,7 +14,7 @@ import { join } from 'node:path';
 import { writeRelief } from './support/env.mjs';
 import { importScan, seedPart, startServer } from './support/server.mjs';
 import { launch, login, poll, waitViewer } from './support/browser.mjs';
-import { capture, compareWithImage } from './support/pixels.mjs';
+import { capture, compareWithImage, serverRenderUrl } from './support/pixels.mjs';
 
 let server;
 let browser;
@@ -82,9 +82,7 @@ test('a model whose geometry stays on the server is seen image-based, with its p
 
   // Against the server's full-resolution render of the same camera.
   const frame = await capture(page, 'image');
-  const cam = await page.evaluate(() => window.meshwikiViewer.camera());
-  const q = new URLSearchParams({ eye: cam.eye.join(','), target: cam.target.join(','), up: cam.up.join(','), fovy: String(cam.fovy), w: String(frame.width), h: String(frame.height) });
-  const url = `/api/v1/models/${model.id}/render?${q}`;
+  const url = await serverRenderUrl(page, model.id, frame);
   const image = await compareWithImage(page, 'image', url);
   // The same frame without the images: the sparse mesh's own shading.
   await page.evaluate(() => window.meshwikiViewer.setImageShading(false));

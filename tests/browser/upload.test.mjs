@@ -14,8 +14,9 @@ import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
 import { SHARED_MESHES } from './support/env.mjs';
+import { storedZip } from './support/zip.mjs';
 import { ADMIN, startServer } from './support/server.mjs';
-import { gotoSettled, launch, login, poll, waitViewer } from './support/browser.mjs';
+import { closePage, gotoSettled, launch, login, poll, waitViewer } from './support/browser.mjs';
 
 let server;
 let browser;
@@ -68,56 +69,6 @@ function generatedGltf(dir, n = 120) {
   writeFileSync(join(dir, 'grid.gltf'), JSON.stringify(gltf));
   writeFileSync(join(dir, 'grid.bin'), bin);
   return [join(dir, 'grid.gltf'), join(dir, 'grid.bin')];
-}
-
-/** CRC-32 (IEEE) of `buf`, as zip records it. */
-function crc32(buf) {
-  let c;
-  let crc = 0xffffffff;
-  for (const b of buf) {
-    c = (crc ^ b) & 0xff;
-    for (let k = 0; k < 8; k++) c = c & 1 ? 0xedb88320 ^ (c >>> 1) : c >>> 1;
-    crc = (crc >>> 8) ^ c;
-  }
-  return (crc ^ 0xffffffff) >>> 0;
-}
-
-/** A zip archive (entries stored, not compressed) of `entries`: [name, bytes]. */
-function storedZip(entries) {
-  const parts = [];
-  const central = [];
-  let offset = 0;
-  for (const [name, data] of entries) {
-    const n = Buffer.from(name);
-    const crc = crc32(data);
-    const local = Buffer.alloc(30);
-    local.writeUInt32LE(0x04034b50, 0);
-    local.writeUInt16LE(20, 4);
-    local.writeUInt32LE(crc, 14);
-    local.writeUInt32LE(data.length, 18);
-    local.writeUInt32LE(data.length, 22);
-    local.writeUInt16LE(n.length, 26);
-    const dir = Buffer.alloc(46);
-    dir.writeUInt32LE(0x02014b50, 0);
-    dir.writeUInt16LE(20, 4);
-    dir.writeUInt16LE(20, 6);
-    dir.writeUInt32LE(crc, 16);
-    dir.writeUInt32LE(data.length, 20);
-    dir.writeUInt32LE(data.length, 24);
-    dir.writeUInt16LE(n.length, 28);
-    dir.writeUInt32LE(offset, 42);
-    parts.push(local, n, data);
-    central.push(dir, n);
-    offset += local.length + n.length + data.length;
-  }
-  const cd = Buffer.concat(central);
-  const end = Buffer.alloc(22);
-  end.writeUInt32LE(0x06054b50, 0);
-  end.writeUInt16LE(entries.length, 8);
-  end.writeUInt16LE(entries.length, 10);
-  end.writeUInt32LE(cd.length, 12);
-  end.writeUInt32LE(offset, 16);
-  return Buffer.concat([...parts, cd, end]);
 }
 
 /** Records what the upload form shows (the page navigates away when done). */
@@ -179,7 +130,7 @@ test('a glTF with its buffer and texture uploads through the page, with progress
   await gotoSettled(page, `${server.base}/models/${id}`);
   const stats = await waitViewer(page, (s) => s.triangles > 0);
   assert.ok(stats.triangles > 0, 'the viewer draws the uploaded scan');
-  await page.close();
+  await closePage(page);
 });
 
 test('a .zip cut off after its first chunk resumes when picked again after a reload, and builds', { timeout: 600_000 }, async () => {
@@ -214,7 +165,7 @@ test('a .zip cut off after its first chunk resumes when picked again after a rel
   // The page is closed and opened again; the same file picked again resumes.
   await page.unroute('**/api/v1/uploads/*/files/*');
   await page.goto(`${server.base}/admin/jobs`);
-  await page.evaluate(() => sessionStorage.setItem('mw-statuses', '[]'));
+  await poll(page, () => sessionStorage.setItem('mw-statuses', '[]') ?? true);
   await page.fill('input[name=title]', 'Zipped grid');
   await page.setInputFiles('#scan-files', zipPath);
   await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
@@ -226,5 +177,5 @@ test('a .zip cut off after its first chunk resumes when picked again after a rel
   assert.equal(model.status, 'ready', model.error);
   assert.equal(model.source_name, 'grid.gltf');
   assert.equal(model.triangle_count, 2 * 59 * 59);
-  await page.close();
+  await closePage(page);
 });

@@ -13,7 +13,7 @@ import { join } from 'node:path';
 import { sampleMesh } from './support/env.mjs';
 import { ADMIN, homeDirection, importScan, seedPart, startServer } from './support/server.mjs';
 import { launch, login, poll, waitViewer } from './support/browser.mjs';
-import { capture, compareWithImage, holes } from './support/pixels.mjs';
+import { capture, compareWithImage, holes, serverRenderUrl } from './support/pixels.mjs';
 import { leafVertices, regionAt } from './support/regions.mjs';
 
 let server;
@@ -66,16 +66,7 @@ test('draws the model, and matches a server render of the same camera', async (t
   const frame = await capture(page, 'home');
   assert.ok(frame.fraction > 0.05, `canvas is blank: ${JSON.stringify(frame)}`);
   assert.ok(s.maxError <= 1.0001, `cut not at 1 px: ${s.maxError}`);
-  const cam = await page.evaluate(() => window.meshwikiViewer.camera());
-  const q = new URLSearchParams({
-    eye: cam.eye.join(','),
-    target: cam.target.join(','),
-    up: cam.up.join(','),
-    fovy: String(cam.fovy),
-    w: String(frame.width),
-    h: String(frame.height),
-  });
-  const url = `/api/v1/models/${model.id}/render?${q}`;
+  const url = await serverRenderUrl(page, model.id, frame);
   const res = await page.evaluate(async (url) => {
     const r = await fetch(url);
     return { status: r.status, type: r.headers.get('Content-Type'), text: r.ok ? '' : await r.text() };

@@ -20,6 +20,7 @@ use super::codec::{self, Grid, PatchRef};
 use super::format::{
     GroupRecord, HAS_COLORS, HAS_NORMALS, HAS_TEXTURE, Header, NO_GROUP, NodeRecord, TableWriter,
 };
+use super::fragment_quality::{self, Features};
 use super::grouping::{PatchOutline, group_patches};
 use super::ingest::{Ingest, Ingested};
 use super::patch::{BuildPatch, ScratchFile, edge_ends};
@@ -52,8 +53,16 @@ pub struct BuildOptions {
     pub zstd_level: i32,
     /// Patches per group.
     pub group_size: usize,
-    /// JPEG quality (1–100) of the patches' texture atlases (textured scans).
+    /// JPEG quality (1–100) of the patches' texture atlases (textured scans): the mean over
+    /// each level's fragments.
     pub texture_quality: u8,
+    /// How far a fragment's JPEG quality moves from `texture_quality` with the density of
+    /// surface and texture features it holds (the TexMesh paper's ΔQ,
+    /// [`super::fragment_quality`]); 0 gives every fragment the same quality.
+    pub texture_spread: u8,
+    /// Measure every atlas' JPEG error against its raw texels ([`TextureReport`]; decodes
+    /// each JPEG once more, for benchmarks).
+    pub measure_textures: bool,
     /// How each group step simplifies (quadric collapses by default; see
     /// `meshwiki-bench simplify` for the comparison with the segment-driven method).
     pub simplifier: Simplifier,
@@ -65,6 +74,14 @@ pub struct BuildOptions {
 /// and drew 593k triangles where 4096 sends 2.34 MB and draws 436k.
 pub const DEFAULT_MAX_PATCH_TRIANGLES: u32 = 4096;
 
+/// Progress stage of a textured build in which every atlas gets its JPEG (after the levels,
+/// before writing).
+pub const ATLAS_STAGE: &str = "encoding textures";
+
+/// The default [`BuildOptions::texture_spread`] (`meshwiki-bench textures` measures it against
+/// uniform quality at equal bytes).
+pub const DEFAULT_TEXTURE_SPREAD: u8 = 10;
+
 impl Default for BuildOptions {
     fn default() -> Self {
         BuildOptions {
@@ -75,6 +92,8 @@ impl Default for BuildOptions {
             zstd_level: 19,
             group_size: 8,
             texture_quality: 85,
+            texture_spread: DEFAULT_TEXTURE_SPREAD,
+            measure_textures: false,
             simplifier: Simplifier::default(),
         }
     }
@@ -100,6 +119,63 @@ pub struct BuildReport {
     pub peak_rss_bytes: Option<u64>,
     /// Surface segments per scale, fine first (the `.mwseg` beside the output).
     pub segments: Vec<u32>,
+    /// The atlases' JPEGs (textured scans).
+    pub textures: Option<TextureReport>,
+}
+
+/// What a textured build's atlases cost (issue 11, item 3).
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct TextureReport {
+    /// Quality of the JPEGs: least, mean, most.
+    pub quality: (u8, f32, u8),
+    /// Fragments at or above their level's mean feature value ([`fragment_quality`]).
+    pub featured: TextureBytes,
+    /// The other fragments.
+    pub plain: TextureBytes,
+}
+
+/// Bytes and (with [`BuildOptions::measure_textures`]) JPEG error of a class of fragments.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct TextureBytes {
+    pub fragments: u32,
+    /// Texels inside the atlases' triangles.
+    pub covered_texels: u64,
+    pub jpeg_bytes: u64,
+    /// Squared error of the decoded JPEGs' covered texels (8-bit RGB) against the raw atlas.
+    pub squared_error: f64,
+    /// Channel samples measured (three a covered texel; 0 when not measured).
+    pub samples: u64,
+    /// Sum over the measured covered texels of the luminance SSIM
+    /// ([`fragment_quality::ssim_map`]).
+    pub ssim_sum: f64,
+}
+
+impl TextureBytes {
+    /// PSNR of the measured texels, in dB (infinite when exact, NaN when not measured).
+    pub fn psnr(&self) -> f64 {
+        if self.samples == 0 {
+            return f64::NAN;
+        }
+        let mse = self.squared_error / self.samples as f64;
+        10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
+
+    /// Mean SSIM of the measured texels (NaN when not measured).
+    pub fn ssim(&self) -> f64 {
+        self.ssim_sum / (self.samples / 3) as f64
+    }
+
+    /// Both classes together.
+    pub fn plus(&self, o: &TextureBytes) -> TextureBytes {
+        TextureBytes {
+            fragments: self.fragments + o.fragments,
+            covered_texels: self.covered_texels + o.covered_texels,
+            jpeg_bytes: self.jpeg_bytes + o.jpeg_bytes,
+            squared_error: self.squared_error + o.squared_error,
+            samples: self.samples + o.samples,
+            ssim_sum: self.ssim_sum + o.ssim_sum,
+        }
+    }
 }
 
 /// Why a build failed. Nothing is left at the output path in any case.
@@ -269,6 +345,8 @@ struct Node {
     tex_len: u32,
     /// Vertices of the encoded patch (more than `vertices` where atlas charts meet).
     encoded_vertices: u32,
+    /// Feature densities of the patch and its atlas (textured scans).
+    features: Features,
 }
 
 struct Group {
@@ -294,6 +372,7 @@ struct Stored {
     tex_offset: u64,
     tex_len: u32,
     encoded_vertices: u32,
+    features: Features,
 }
 
 /// What a group step returns: its errors and stored products, or `None` when the group could
@@ -322,6 +401,8 @@ struct Builder<'a> {
     /// Every patch's atlas, for the level above to resample (textured scans).
     atlases: ScratchFile,
     textured: bool,
+    /// The scratch directory.
+    scratch: PathBuf,
     grid: Grid,
     /// Exact bounds of the input vertices.
     bounds: ([f32; 3], [f32; 3]),
@@ -355,6 +436,7 @@ impl<'a> Builder<'a> {
             blobs: ScratchFile::create(&scratch.join("patches.blobs"))?,
             atlases: ScratchFile::create(&scratch.join("patches.atlases"))?,
             textured: ingested.face_uvs.is_some(),
+            scratch: scratch.to_path_buf(),
             grid,
             bounds: (ingested.bbox.0.into(), ingested.bbox.1.into()),
             nodes: Vec::new(),
@@ -379,7 +461,17 @@ impl<'a> Builder<'a> {
             .stages
             .push(("levels".to_string(), t.elapsed().as_secs_f64()));
 
-        // 5. Write.
+        // 5. Atlases (textured scans) and write.
+        let textures = if builder.textured {
+            let t = Instant::now();
+            let report = builder.place_atlases()?;
+            builder
+                .stages
+                .push(("atlases".to_string(), t.elapsed().as_secs_f64()));
+            Some(report)
+        } else {
+            None
+        };
         let t = Instant::now();
         let output_bytes = builder.write(output, &import, &roots)?;
         if let Some((scratch_segments, _)) = &builder.segments {
@@ -411,6 +503,7 @@ impl<'a> Builder<'a> {
             stages: builder.stages,
             peak_rss_bytes: peak_rss_bytes(),
             segments: builder.segments.map(|(_, c)| c).unwrap_or_default(),
+            textures,
         })
     }
 
@@ -429,14 +522,17 @@ impl<'a> Builder<'a> {
     ) -> io::Result<Stored> {
         let raw = patch.to_bytes();
         let raw_offset = self.raw.append(&raw)?;
-        let (tex_offset, tex_len, jpeg) = match texture {
+        // The atlas' JPEG goes in when writing ([`Builder::place_atlases`]), once every
+        // fragment's features are known.
+        let (tex_offset, tex_len, features) = match texture {
             Some(t) => {
                 let bytes = atlas_to_bytes(t);
                 let offset = self.atlases.append(&bytes)?;
-                let jpeg = atlas::encode_jpeg(&t.image, self.options.texture_quality);
-                (offset, bytes.len() as u32, Some(jpeg))
+                let features =
+                    fragment_quality::features(&patch.positions, &patch.indices, &t.image, &t.uvs);
+                (offset, bytes.len() as u32, features)
             }
-            None => (0, 0, None),
+            None => (0, 0, Features::default()),
         };
         let grid_positions: Vec<[u32; 3]> = patch
             .positions
@@ -450,10 +546,7 @@ impl<'a> Builder<'a> {
             original_ids: &patch.ids,
             indices: &patch.indices,
             shift,
-            texture: match (texture, &jpeg) {
-                (Some(t), Some(j)) => Some((&t.uvs[..], &j[..])),
-                _ => None,
-            },
+            texture: texture.map(|t| (&t.uvs[..], &[][..])),
         };
         let (blob, encoded_vertices) = codec::encode_counted(&patch_ref, self.options.zstd_level);
         let encoded_vertices = encoded_vertices as u32;
@@ -473,6 +566,7 @@ impl<'a> Builder<'a> {
             tex_offset,
             tex_len,
             encoded_vertices,
+            features,
         })
     }
 
@@ -530,6 +624,7 @@ impl<'a> Builder<'a> {
             tex_offset: s.tex_offset,
             tex_len: s.tex_len,
             encoded_vertices: s.encoded_vertices,
+            features: s.features,
         });
         id
     }
@@ -846,6 +941,92 @@ impl<'a> Builder<'a> {
         Ok(pool.into_iter().map(|p| p.node).collect())
     }
 
+    /// Step 5a (textured scans): every fragment's JPEG quality from its features among its
+    /// level's ([`fragment_quality`]), and the JPEG put in its patch's blob. The blobs move to
+    /// a new scratch file.
+    fn place_atlases(&mut self) -> Result<TextureReport, BuildError> {
+        self.blobs.flush()?;
+        self.atlases.flush()?;
+        let textured: Vec<usize> = (0..self.nodes.len())
+            .filter(|&i| self.nodes[i].tex_len > 0)
+            .collect();
+        let levels: Vec<u32> = textured.iter().map(|&i| self.nodes[i].level).collect();
+        let features: Vec<Features> = textured.iter().map(|&i| self.nodes[i].features).collect();
+        let (n, gamma) = fragment_quality::normalised(&levels, &features);
+        // Per node: its quality and whether it is featured.
+        let mut quality: Vec<Option<(u8, bool)>> = vec![None; self.nodes.len()];
+        for (k, &i) in textured.iter().enumerate() {
+            let q = fragment_quality::quality(
+                n[k],
+                gamma[k],
+                self.options.texture_quality,
+                self.options.texture_spread,
+            );
+            quality[i] = Some((q, n[k] >= gamma[k]));
+        }
+        self.progress.stage(ATLAS_STAGE, self.nodes.len() as u64);
+        let placed = ScratchFile::create(&self.scratch.join("patches.placed"))?;
+        let mut report = TextureReport::default();
+        let mut quality_sum = 0u64;
+        let (mut q_min, mut q_max) = (u8::MAX, 0u8);
+        let all: Vec<usize> = (0..self.nodes.len()).collect();
+        for chunk in all.chunks(64) {
+            if self.progress.cancelled() {
+                return Err(BuildError::Cancelled);
+            }
+            let this = &*self;
+            let done: Vec<io::Result<(Vec<u8>, Option<TextureBytes>)>> = chunk
+                .par_iter()
+                .map(|&i| {
+                    let n = &this.nodes[i];
+                    let blob = this.blobs.read(n.blob_offset, n.blob_len as usize)?;
+                    let (Some((q, _)), Some(atlas)) = (quality[i], this.load_atlas(i as u32)?)
+                    else {
+                        return Ok((blob, None));
+                    };
+                    let jpeg = atlas::encode_jpeg(&atlas.image, q);
+                    let blob = codec::with_image(&blob, &jpeg)
+                        .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+                    let measured = measure_atlas(
+                        &atlas,
+                        &jpeg,
+                        n.features.covered_texels,
+                        this.options.measure_textures,
+                    )?;
+                    Ok((blob, Some(measured)))
+                })
+                .collect();
+            for (&i, result) in chunk.iter().zip(done) {
+                let (blob, measured) = result?;
+                let n = &mut self.nodes[i];
+                n.blob_offset = placed.append(&blob)?;
+                n.blob_len = blob.len() as u32;
+                n.blob_crc = crc32fast::hash(&blob);
+                if let (Some(m), Some((q, featured))) = (measured, quality[i]) {
+                    let class = if featured {
+                        &mut report.featured
+                    } else {
+                        &mut report.plain
+                    };
+                    *class = class.plus(&m);
+                    quality_sum += u64::from(q);
+                    q_min = q_min.min(q);
+                    q_max = q_max.max(q);
+                }
+                self.progress.advance(1);
+            }
+        }
+        placed.flush()?;
+        self.blobs = placed;
+        let fragments = report.featured.fragments + report.plain.fragments;
+        report.quality = (
+            q_min.min(q_max),
+            quality_sum as f32 / fragments.max(1) as f32,
+            q_max,
+        );
+        Ok(report)
+    }
+
     /// Step 5: tables and blobs in locality order.
     fn write(
         &mut self,
@@ -949,6 +1130,45 @@ impl<'a> Builder<'a> {
     }
 }
 
+/// One fragment's bytes, covered texels (counted with its features) and, when `measure`, JPEG
+/// error over those texels.
+fn measure_atlas(
+    atlas: &PatchTexture,
+    jpeg: &[u8],
+    covered_texels: u64,
+    measure: bool,
+) -> io::Result<TextureBytes> {
+    let mut bytes = TextureBytes {
+        fragments: 1,
+        covered_texels,
+        jpeg_bytes: jpeg.len() as u64,
+        ..TextureBytes::default()
+    };
+    if measure {
+        let (w, h) = (atlas.image.width() as usize, atlas.image.height() as usize);
+        let covered = fragment_quality::coverage(w, h, &atlas.uvs);
+        let back = mesh::Texture::decode(jpeg).map_err(io::Error::other)?;
+        let ssim = fragment_quality::ssim_map(&atlas.image, &back)
+            .ok_or_else(|| io::Error::other("the JPEG decodes to another size"))?;
+        for (((&c, a), b), s) in covered
+            .iter()
+            .zip(atlas.image.texels())
+            .zip(back.texels())
+            .zip(ssim)
+        {
+            if c {
+                bytes.ssim_sum += f64::from(s);
+                for k in 0..3 {
+                    let d = f64::from(a[k]) - f64::from(b[k]);
+                    bytes.squared_error += d * d;
+                }
+                bytes.samples += 3;
+            }
+        }
+    }
+    Ok(bytes)
+}
+
 /// A leaf's atlas, cut from the scan's textures at their own resolution.
 fn leaf_atlas(
     patch: &BuildPatch,
@@ -1011,6 +1231,7 @@ fn coarse_atlases(
                 positions: &p.positions,
                 indices: &p.indices,
                 finer: &surface,
+                last: Default::default(),
             };
             Some(atlas::bake(&layout, &source, true))
         })

@@ -231,6 +231,7 @@ pub struct Patch {
 }
 
 /// Input of [`encode`]: a patch with positions already on the grid.
+#[derive(Clone, Copy)]
 pub struct PatchRef<'a> {
     pub grid_positions: &'a [[u32; 3]],
     pub colors: Option<&'a [[u8; 4]]>,
@@ -852,6 +853,26 @@ fn encode_split(
     (blob, used)
 }
 
+/// `blob` with its image section holding `image`: the build encodes a textured patch before
+/// its atlas' quality is known (an empty image section) and puts the JPEG in when writing
+/// ([`super::fragment_quality`]). Refused for a blob without an image section.
+pub fn with_image(blob: &[u8], image: &[u8]) -> Result<Vec<u8>, CodecError> {
+    if blob.len() < 16 || blob[5] & BLOB_IMAGE == 0 {
+        return Err(CodecError::Truncated);
+    }
+    let old = u32_at(blob, 12)? as usize;
+    let body = blob
+        .get(16usize.checked_add(old).ok_or(CodecError::Truncated)?..)
+        .ok_or(CodecError::Truncated)?;
+    let len = u32::try_from(image.len()).map_err(|_| CodecError::Sizes)?;
+    let mut out = Vec::with_capacity(16 + image.len() + body.len());
+    out.extend_from_slice(&blob[..12]);
+    out.extend_from_slice(&len.to_le_bytes());
+    out.extend_from_slice(image);
+    out.extend_from_slice(body);
+    Ok(out)
+}
+
 /// Whether `blob` decodes to the triangles, grid positions (relative to `min`) and ids the
 /// encoder meant.
 fn decodes_back(
@@ -1343,6 +1364,37 @@ mod tests {
         let (blob, vertices) = encode_counted(&patch, 3);
         let p = decode(&blob, &grid).expect("decodes");
         assert_eq!(p.image.as_deref(), Some(&image[..]));
+        // The image section can be filled in afterwards (the build's fragment qualities),
+        // the rest of the blob decoding the same.
+        let empty = encode(
+            &PatchRef {
+                texture: Some((&corner_uvs, &[])),
+                ..patch
+            },
+            3,
+        );
+        let filled = with_image(&empty, &image).expect("has an image section");
+        assert_eq!(filled, blob);
+        let refilled = with_image(&filled, &[9, 9]).expect("has an image section");
+        let q = decode(&refilled, &grid).expect("decodes");
+        assert_eq!(q.image.as_deref(), Some(&[9u8, 9][..]));
+        assert_eq!(
+            (q.positions, q.indices),
+            (p.positions.clone(), p.indices.clone())
+        );
+        assert!(
+            with_image(
+                &encode(
+                    &PatchRef {
+                        texture: None,
+                        ..patch
+                    },
+                    3
+                ),
+                &image
+            )
+            .is_err()
+        );
         // One extra vertex per row on the chart border (x = 6 belongs to both halves).
         assert_eq!(p.positions.len(), 12 * 12 + 12);
         assert_eq!(vertices, p.positions.len());

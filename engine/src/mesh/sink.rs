@@ -141,3 +141,96 @@ impl MeshSink for Mesh {
         Ok(())
     }
 }
+
+/// The in-memory consumer of a textured scan: the mesh, the textures in the order handed over,
+/// and every triangle's corner coordinates aligned with `mesh.indices`
+/// ([`TexturedFace::NONE`] for triangles delivered without). It holds readers to the
+/// [`MeshSink`] contract: a texture after the first triangle, or faces not one per triangle,
+/// are refused.
+#[derive(Debug, Default)]
+pub struct TexturedMesh {
+    pub mesh: Mesh,
+    pub textures: Vec<SourceTexture>,
+    pub faces: Vec<TexturedFace>,
+}
+
+impl MeshSink for TexturedMesh {
+    fn begin(&mut self, info: &SourceInfo) -> Result<(), ImportError> {
+        self.textures.clear();
+        self.faces.clear();
+        self.mesh.begin(info)
+    }
+
+    fn vertices(&mut self, batch: VertexBatch<'_>) -> Result<(), ImportError> {
+        self.mesh.vertices(batch)
+    }
+
+    fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
+        self.faces
+            .extend(std::iter::repeat_n(TexturedFace::NONE, triangles.len()));
+        self.mesh.triangles(triangles)
+    }
+
+    fn texture(&mut self, texture: SourceTexture) -> Result<(), ImportError> {
+        if !self.mesh.indices.is_empty() {
+            return Err(ImportError::sink("a texture after the first triangle"));
+        }
+        self.textures.push(texture);
+        Ok(())
+    }
+
+    fn textured_triangles(
+        &mut self,
+        triangles: &[[u32; 3]],
+        faces: &[TexturedFace],
+    ) -> Result<(), ImportError> {
+        if faces.len() != triangles.len() {
+            return Err(ImportError::sink(format!(
+                "{} texture faces for {} triangles",
+                faces.len(),
+                triangles.len()
+            )));
+        }
+        self.faces.extend_from_slice(faces);
+        self.mesh.triangles(triangles)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Texture;
+
+    #[test]
+    fn textured_mesh_keeps_faces_aligned_and_holds_readers_to_the_contract() {
+        let texture = || SourceTexture {
+            image: std::sync::Arc::new(Texture::from_texels(1, 1, vec![[9; 4]]).expect("1x1")),
+            wrap_s: crate::mesh::Wrap::Clamp,
+            wrap_t: crate::mesh::Wrap::Clamp,
+        };
+        let mut m = TexturedMesh::default();
+        m.begin(&SourceInfo::default()).unwrap();
+        m.texture(texture()).unwrap();
+        m.vertices(VertexBatch {
+            positions: &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0; 3]],
+            colors: None,
+            normals: None,
+        })
+        .unwrap();
+        let face = TexturedFace {
+            uv: [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]],
+            texture: 0,
+        };
+        m.textured_triangles(&[[0, 1, 2]], &[face]).unwrap();
+        m.triangles(&[[1, 3, 2]]).unwrap();
+        assert_eq!(m.faces, vec![face, TexturedFace::NONE]);
+        assert_eq!(m.mesh.triangle_count(), 2);
+        // A texture after a triangle, or faces not one a triangle, are refused.
+        assert!(m.texture(texture()).is_err());
+        assert!(m.textured_triangles(&[[0, 1, 2]], &[]).is_err());
+        assert_eq!(m.mesh.triangle_count(), 2);
+        // A new stream starts afresh.
+        m.begin(&SourceInfo::default()).unwrap();
+        assert!(m.faces.is_empty() && m.textures.is_empty() && m.mesh.indices.is_empty());
+    }
+}

@@ -8,9 +8,16 @@
 //! weathered stone — dark in recesses, light on worn ridges — with remnants of red-ochre and
 //! blue pigment in the carvings. Rows are computed on the fly (three rows of heights in
 //! memory), so 50M triangles stream into a [`MeshSink`] or a PLY file in constant memory.
+//!
+//! The textured variant ([`Relief::stream_textured`], issue 11's demo of a photogrammetry-like
+//! scan) adds one square texture: the colours of the same relief sampled on a finer grid (the
+//! carvings, weathering and pigment are functions of position, so the finer grid shows the
+//! same panel with more detail), mapped by the vertices' grid coordinates.
 
 use super::ply_write::{PlyLayout, PlyWriter};
-use super::{ImportError, MeshSink, SourceInfo, VertexBatch};
+use super::{
+    ImportError, MeshSink, SourceInfo, SourceTexture, Texture, TexturedFace, VertexBatch, Wrap,
+};
 use std::f64::consts::{PI, TAU};
 use std::path::Path;
 
@@ -196,6 +203,18 @@ impl Relief {
 
     pub fn triangle_count(&self) -> u64 {
         2 * (self.n as u64).pow(2)
+    }
+
+    /// What an import of the relief reports ([`Relief::stream`], or with `textured`,
+    /// [`Relief::stream_textured`]).
+    pub fn stats(&self, textured: bool) -> super::ImportStats {
+        super::ImportStats {
+            vertices: self.vertex_count(),
+            triangles: self.triangle_count(),
+            has_colors: true,
+            textures: u32::from(textured),
+            ..super::ImportStats::default()
+        }
     }
 
     fn coord(&self, i: u32) -> f64 {
@@ -415,22 +434,101 @@ impl Relief {
         }
     }
 
+    /// The relief's colours on a `side × side` grid (`side ≥ 2`): the texture of
+    /// [`Relief::stream_textured`], row 0 at `v = -1` as the relief's own row 0.
+    pub fn texture(&self, side: u32) -> Texture {
+        let side = side.clamp(2, MAX_GRID + 1);
+        let finer = Relief::new(2 * u64::from(side - 1).pow(2), self.seed);
+        let mut texels = Vec::with_capacity(side as usize * side as usize);
+        let _ = finer.for_each_row(|_, _, c| -> Result<(), ()> {
+            texels.extend_from_slice(c);
+            Ok(())
+        });
+        let side = finer.n + 1;
+        Texture::from_texels(side, side, texels).unwrap_or_else(|| {
+            // Unreachable (the finer grid has side² colours); a grey texel keeps it total.
+            Texture::from_texels(1, 1, vec![[128, 128, 128, 255]]).expect("1x1")
+        })
+    }
+
+    /// [`Relief::stream`] with a `side × side` texture ([`Relief::texture`]): every corner's
+    /// texture coordinate is its vertex's grid position, at the centre of the texel there.
+    pub fn stream_textured(&self, side: u32, sink: &mut dyn MeshSink) -> Result<(), ImportError> {
+        self.stream_with_texture(std::sync::Arc::new(self.texture(side)), sink)
+    }
+
+    /// [`Relief::stream_textured`] with its texture made beforehand (benchmarks time the build
+    /// without the texture's generation, as a scan's texture is decoded, not computed).
+    pub fn stream_with_texture(
+        &self,
+        texture: std::sync::Arc<Texture>,
+        sink: &mut dyn MeshSink,
+    ) -> Result<(), ImportError> {
+        let m = f64::from(texture.width() - 1);
+        let texels = f64::from(texture.width());
+        let w = self.n + 1;
+        let n = f64::from(self.n);
+        let uv = |i: u32| {
+            let (c, r) = (f64::from(i % w), f64::from(i / w));
+            [
+                ((c * m / n + 0.5) / texels) as f32,
+                ((r * m / n + 0.5) / texels) as f32,
+            ]
+        };
+        let mut texture = Some(texture);
+        let mut faces = Vec::new();
+        self.stream_with(
+            sink,
+            &mut |sink: &mut dyn MeshSink| match texture.take() {
+                Some(t) => sink.texture(SourceTexture {
+                    image: t,
+                    wrap_s: Wrap::Clamp,
+                    wrap_t: Wrap::Clamp,
+                }),
+                None => Ok(()),
+            },
+            &mut |sink: &mut dyn MeshSink, tris: &[[u32; 3]]| {
+                faces.clear();
+                faces.extend(tris.iter().map(|t| TexturedFace {
+                    uv: t.map(uv),
+                    texture: 0,
+                }));
+                sink.textured_triangles(tris, &faces)
+            },
+        )
+    }
+
     /// Streams the relief into `sink` (vertices row by row, each band of triangles after
     /// the rows it joins).
     pub fn stream(&self, sink: &mut dyn MeshSink) -> Result<(), ImportError> {
+        self.stream_with(sink, &mut |_| Ok(()), &mut |sink, tris| {
+            sink.triangles(tris)
+        })
+    }
+
+    /// [`Relief::stream`] with `after_begin` called once after `begin` and triangles handed
+    /// over by `triangles`.
+    #[allow(clippy::type_complexity)]
+    fn stream_with(
+        &self,
+        sink: &mut dyn MeshSink,
+        after_begin: &mut dyn FnMut(&mut dyn MeshSink) -> Result<(), ImportError>,
+        triangles: &mut dyn FnMut(&mut dyn MeshSink, &[[u32; 3]]) -> Result<(), ImportError>,
+    ) -> Result<(), ImportError> {
         sink.begin(&SourceInfo {
             vertex_count: Some(self.vertex_count()),
             triangle_count_hint: Some(self.triangle_count()),
             has_colors: true,
             has_normals: false,
         })?;
+        after_begin(sink)?;
         let mut tris = Vec::new();
         let mut pos = Vec::new();
         let mut col = Vec::new();
-        let flush = |sink: &mut dyn MeshSink,
-                     pos: &mut Vec<[f32; 3]>,
-                     col: &mut Vec<[u8; 4]>,
-                     tris: &mut Vec<[u32; 3]>|
+        let mut flush = |sink: &mut dyn MeshSink,
+                         pos: &mut Vec<[f32; 3]>,
+                         col: &mut Vec<[u8; 4]>,
+                         tris: &mut Vec<[u32; 3]>|
          -> Result<(), ImportError> {
             if !pos.is_empty() {
                 sink.vertices(VertexBatch {
@@ -440,7 +538,7 @@ impl Relief {
                 })?;
             }
             if !tris.is_empty() {
-                sink.triangles(tris)?;
+                triangles(sink, tris)?;
             }
             pos.clear();
             col.clear();
@@ -486,7 +584,7 @@ impl Relief {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::Mesh;
+    use crate::mesh::{Mesh, TexturedMesh};
 
     #[test]
     fn counts_and_determinism() {
@@ -504,5 +602,59 @@ mod tests {
         let mut c = Mesh::default();
         Relief::new(20_000, 8).stream(&mut c).unwrap();
         assert_ne!(a.positions, c.positions);
+    }
+
+    /// Mean difference (per channel) between each corner's texel and its vertex colour.
+    fn texel_to_vertex(t: &TexturedMesh, plain: &Mesh) -> f64 {
+        let image = &t.textures[0].image;
+        let (w, h) = (image.width() as f32, image.height() as f32);
+        let mut err = 0.0f64;
+        let mut n = 0usize;
+        for (face, tri) in t.faces.iter().zip(plain.indices.chunks_exact(3)) {
+            assert_eq!(face.texture, 0);
+            for (&[u, v], &vertex) in face.uv.iter().zip(tri) {
+                assert!((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v));
+                let texel = image.texels()[(v * h) as usize * w as usize + (u * w) as usize];
+                let colour = plain.colors[vertex as usize];
+                err += (0..3)
+                    .map(|c| (f64::from(texel[c]) - f64::from(colour[c])).abs())
+                    .sum::<f64>();
+                n += 3;
+            }
+        }
+        err / n as f64
+    }
+
+    #[test]
+    fn the_textured_relief_maps_its_own_colours_at_finer_detail() {
+        let relief = Relief::new(20_000, 7);
+        let mut plain = Mesh::default();
+        relief.stream(&mut plain).unwrap();
+        // At the vertices' own resolution the texture is exactly the vertex colours, each
+        // corner on its vertex's texel.
+        let mut same = TexturedMesh::default();
+        relief.stream_textured(101, &mut same).unwrap();
+        assert_eq!(same.mesh, plain);
+        assert_eq!(same.textures.len(), 1);
+        assert_eq!(same.faces.len(), plain.triangle_count());
+        assert_eq!(texel_to_vertex(&same, &plain), 0.0);
+        // Finer: the same panel (the finer cavities and the colour noise differ) with more
+        // detail than the vertices carry.
+        let mut fine = TexturedMesh::default();
+        relief.stream_textured(401, &mut fine).unwrap();
+        assert_eq!(fine.mesh, plain);
+        let image = &fine.textures[0].image;
+        assert_eq!((image.width(), image.height()), (401, 401));
+        let mean = texel_to_vertex(&fine, &plain);
+        assert!(
+            mean < 30.0,
+            "mean texel-to-vertex colour difference {mean:.1}"
+        );
+        let distinct: std::collections::HashSet<_> = image.texels().iter().collect();
+        assert!(
+            distinct.len() > 2 * plain.vertex_count(),
+            "{}",
+            distinct.len()
+        );
     }
 }

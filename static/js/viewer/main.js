@@ -723,10 +723,14 @@ class Viewer {
   /** Figures for tests and the streaming bench. */
   stats() {
     const r = this.result || { draw: [], triangles: 0, maxError: 0, foveaError: 0, pending: 0, requests: [] };
+    // Drawn patches with an atlas, and those whose atlas is decoded (drawn textured).
+    const textured = r.draw.map((n) => this.view.meshes.get(n)).filter((m) => m && m.geometry.getAttribute('uv'));
     return {
       ...this.streamer.stats,
       tableBytes: this.tableBytes,
       drawn: r.draw.length,
+      texturesWanted: textured.length,
+      texturesReady: textured.filter((m) => m.userData.texture).length,
       triangles: r.triangles,
       maxError: r.maxError,
       maxRatio: r.maxRatio,

@@ -102,6 +102,24 @@ export async function poll(page, fn, accept = Boolean, timeout = 60_000, arg = u
  * `page.goto(url)` on a page that may navigate by itself meanwhile (a model page reloads
  * when its build ends): a navigation interrupted or aborted by it is tried again.
  */
+/**
+ * Closes a page, giving up after `ms` (the browser closes it with its context at the end).
+ * The upload test's zip case twice hung to its 10-minute timeout in a full run after its model
+ * was built (never in 10 runs of that file alone); of its awaits, only this one and the
+ * evaluations that `poll` now guards had no bound.
+ */
+export async function closePage(page, ms = 15_000) {
+  let timer;
+  const gaveUp = new Promise((resolve) => {
+    timer = setTimeout(() => resolve('gave up'), ms);
+  });
+  const closing = page.close();
+  closing.catch(() => {});
+  const outcome = await Promise.race([closing, gaveUp]);
+  clearTimeout(timer);
+  if (outcome === 'gave up') console.log(`# closing the page took over ${ms} ms: left to the browser`);
+}
+
 export async function gotoSettled(page, url, tries = 5) {
   for (let k = 1; ; k++) {
     try {

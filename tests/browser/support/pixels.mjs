@@ -83,6 +83,21 @@ export function holes(page, name, final, erode = 4) {
 }
 
 /** Compares frame `name` with an image URL (same origin), over pixels that are surface in both. */
+/** The server render (`GET /api/v1/models/{id}/render`) of the viewer's current camera at the
+ * size of the captured `frame`. */
+export async function serverRenderUrl(page, modelId, frame) {
+  const cam = await page.evaluate(() => window.meshwikiViewer.camera());
+  const q = new URLSearchParams({
+    eye: cam.eye.join(','),
+    target: cam.target.join(','),
+    up: cam.up.join(','),
+    fovy: String(cam.fovy),
+    w: String(frame.width),
+    h: String(frame.height),
+  });
+  return `/api/v1/models/${modelId}/render?${q}`;
+}
+
 export function compareWithImage(page, name, url) {
   return page.evaluate(async ({ name, url }) => {
     const f = window.__frames[name];

@@ -1,0 +1,337 @@
+//! `meshwiki-bench textures`: fragment quality by feature density (issue 11, item 3; the
+//! TexMesh paper, `004_28b2044bb56fb245.txt` §3) against uniform quality at equal bytes.
+//!
+//! A textured scan is built with the fragments' JPEG quality following their feature density
+//! (base quality `Q`, spreads `ΔQ`), and with uniform qualities bisected until their atlases
+//! take the same bytes (the two integer qualities around it, PSNR interpolated in bytes).
+//! Every build measures each atlas' JPEG against its raw texels, over the texels inside its
+//! triangles ([`meshwiki_engine::lod::build::TextureReport`]); fragments are split into the
+//! featured ones (at or above their level's mean feature value) and the plain ones, which
+//! are the same fragments in every build (the geometry and atlases do not depend on the
+//! quality). Figures are printed, never asserted.
+//!
+//! With `synth:N`, the scan is the demo generator's relief of N triangles with its texture
+//! ([`meshwiki_engine::mesh::Relief::stream_textured`], `--texture-side` texels a side), and
+//! the bench first builds it without and with the texture, side by side: time, peak memory
+//! and the atlases' bytes per texel against the source texture as one JPEG of the same
+//! quality (issue 11: throughput and memory within 2× of the untextured build, output per
+//! texel no larger than the source JPEG's).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Args as ClapArgs;
+use meshwiki_engine::lod::atlas::encode_jpeg;
+use meshwiki_engine::lod::build::{BuildOptions, BuildReport, TextureBytes, TextureReport};
+use meshwiki_engine::mesh::{self, MeshSink, Relief};
+use meshwiki_engine::progress::NoProgress;
+
+/// The scan measured when none is named (relative to the repository root).
+const DEFAULT_SCAN: &str =
+    "../shared/data/meshes/mask_bali_100k_textured_gltf/mask-gltf-2.0_separated-valid.gltf";
+
+/// Options of `bench textures`.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct Args {
+    /// A textured scan, or `synth:N` for the generated relief of N triangles with a texture
+    /// (default: the Bali mask from `../shared/data`).
+    pub scan: Option<String>,
+    /// Texels a side of the generated relief's texture (`synth:N`).
+    #[arg(long, default_value_t = 4096)]
+    pub texture_side: u32,
+    /// Base JPEG quality `Q` (the mean of each level's fragments).
+    #[arg(long, default_value_t = BuildOptions::default().texture_quality)]
+    pub quality: u8,
+    /// Spreads `ΔQ` to measure.
+    #[arg(long, value_delimiter = ',', default_values_t = [10u8, 20, 30])]
+    pub spreads: Vec<u8>,
+}
+
+struct Measured {
+    report: TextureReport,
+    seconds: f64,
+}
+
+/// What is built: a scan file or the generated relief (with its texture, made once).
+enum Source {
+    File(PathBuf),
+    Relief {
+        triangles: u64,
+        side: u32,
+        texture: std::sync::Arc<mesh::Texture>,
+    },
+}
+
+impl Source {
+    fn name(&self) -> String {
+        match self {
+            Source::File(p) => p.display().to_string(),
+            Source::Relief {
+                triangles, side, ..
+            } => {
+                format!("generated relief, {triangles} triangles, {side}² texture")
+            }
+        }
+    }
+
+    /// Builds it (`textured` false: the relief without its texture).
+    fn build(&self, out: &Path, options: &BuildOptions, textured: bool) -> Result<BuildReport> {
+        // Peak memory per build: reset the process' high-water mark (Linux).
+        let _ = std::fs::write("/proc/self/clear_refs", "5");
+        let report = match self {
+            Source::File(p) => meshwiki_engine::lod::build_file(p, out, options, &NoProgress),
+            Source::Relief {
+                triangles, texture, ..
+            } => {
+                let relief = Relief::new(*triangles, mesh::synth::DEFAULT_SEED);
+                meshwiki_engine::lod::build_from(
+                    |sink: &mut dyn MeshSink| {
+                        if textured {
+                            relief.stream_with_texture(texture.clone(), sink)?;
+                        } else {
+                            relief.stream(sink)?;
+                        }
+                        Ok(relief.stats(textured))
+                    },
+                    out,
+                    options,
+                    &NoProgress,
+                )
+            }
+        };
+        report.with_context(|| format!("building {}", self.name()))
+    }
+}
+
+impl Measured {
+    fn all(&self) -> TextureBytes {
+        self.report.featured.plus(&self.report.plain)
+    }
+}
+
+fn build(scan: &Source, dir: &Path, quality: u8, spread: u8) -> Result<Measured> {
+    let out = dir.join("textures.mwlod");
+    let options = BuildOptions {
+        texture_quality: quality,
+        texture_spread: spread,
+        measure_textures: true,
+        ..BuildOptions::default()
+    };
+    let t = Instant::now();
+    let report = scan.build(&out, &options, true)?;
+    let _ = std::fs::remove_file(&out);
+    let report = report
+        .textures
+        .context("the scan has no textures (the bench needs a textured scan)")?;
+    Ok(Measured {
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Runs `bench textures`.
+pub fn run(args: Args) -> Result<()> {
+    let scan = match args.scan.as_deref().unwrap_or(DEFAULT_SCAN) {
+        s if s.starts_with("synth:") => {
+            let n = s["synth:".len()..].trim().replace('_', "");
+            let triangles: u64 = n
+                .parse()
+                .with_context(|| format!("synth:N needs a triangle count, got {s:?}"))?;
+            let side = args.texture_side.clamp(2, 16384);
+            let t = Instant::now();
+            let texture = std::sync::Arc::new(
+                Relief::new(triangles, mesh::synth::DEFAULT_SEED).texture(side),
+            );
+            println!(
+                "generated the relief's {side}² texture in {:.1} s (not timed below: a scan's \
+                 texture is decoded, not computed)",
+                t.elapsed().as_secs_f64()
+            );
+            Source::Relief {
+                triangles,
+                side,
+                texture,
+            }
+        }
+        s => {
+            let path = PathBuf::from(s);
+            if !path.is_file() {
+                bail!("no scan at {s} (the default is the Bali mask under ../shared/data)");
+            }
+            Source::File(path)
+        }
+    };
+    let dir = std::env::temp_dir().join(format!("meshwiki-bench-textures-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let result = bench(&args, &scan, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+/// Without and with the texture, side by side.
+fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
+    let Source::Relief {
+        triangles, texture, ..
+    } = scan
+    else {
+        return Ok(());
+    };
+    let out = dir.join("throughput.mwlod");
+    let options = BuildOptions {
+        texture_quality: args.quality,
+        ..BuildOptions::default()
+    };
+    let mut rows = Vec::new();
+    for textured in [false, true] {
+        let t = Instant::now();
+        let report = scan.build(&out, &options, textured)?;
+        let seconds = t.elapsed().as_secs_f64();
+        let _ = std::fs::remove_file(&out);
+        let peak = report.peak_rss_bytes.unwrap_or(0) as f64 / 1e6;
+        println!(
+            "  {:<10} build {seconds:>6.1} s, {:>6.2} M triangles/s, peak memory {peak:>6.0} MB, \
+             output {:>7.2} MB",
+            if textured { "textured" } else { "untextured" },
+            *triangles as f64 / seconds / 1e6,
+            report.output_bytes as f64 / 1e6,
+        );
+        let stages: Vec<String> = report
+            .stages
+            .iter()
+            .map(|(name, s)| format!("{name} {s:.1} s"))
+            .collect();
+        println!("             stages: {}", stages.join(", "));
+        rows.push((seconds, peak, report));
+    }
+    let (plain, textured) = (&rows[0], &rows[1]);
+    println!(
+        "  textured / untextured: time {:.2}x, peak memory {:.2}x (issue 11: within 2x)",
+        textured.0 / plain.0,
+        textured.1 / plain.1.max(1.0)
+    );
+    if let Some(t) = &textured.2.textures {
+        let all = t.featured.plus(&t.plain);
+        let jpeg = encode_jpeg(texture, args.quality).len();
+        let texels = u64::from(texture.width()) * u64::from(texture.height());
+        println!(
+            "  atlases: {:.2} MB for {:.1} M covered texels = {:.3} bytes a texel; the source \
+             texture as one JPEG q{}: {:.2} MB for {:.1} M texels = {:.3} bytes a texel",
+            all.jpeg_bytes as f64 / 1e6,
+            all.covered_texels as f64 / 1e6,
+            all.jpeg_bytes as f64 / all.covered_texels.max(1) as f64,
+            args.quality,
+            jpeg as f64 / 1e6,
+            texels as f64 / 1e6,
+            jpeg as f64 / texels.max(1) as f64,
+        );
+    }
+    Ok(())
+}
+
+fn bench(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
+    println!(
+        "bench textures: {}, base quality {}",
+        scan.name(),
+        args.quality
+    );
+    throughput(args, scan, dir)?;
+    println!("  fragment quality by feature density against uniform quality at equal bytes:");
+    let mut uniform: BTreeMap<u8, Measured> = BTreeMap::new();
+    let uniform_at = |q: u8, uniform: &mut BTreeMap<u8, Measured>| -> Result<u64> {
+        if let std::collections::btree_map::Entry::Vacant(e) = uniform.entry(q) {
+            e.insert(build(scan, dir, q, 0)?);
+        }
+        Ok(uniform[&q].all().jpeg_bytes)
+    };
+    let base_bytes = uniform_at(args.quality, &mut uniform)?;
+    let base = &uniform[&args.quality];
+    let (f, p) = (base.report.featured, base.report.plain);
+    println!(
+        "  fragments: {} featured ({:.1} M texels), {} plain ({:.1} M texels); uniform q{} \
+         build {:.1} s, atlases {:.2} MB",
+        f.fragments,
+        f.covered_texels as f64 / 1e6,
+        p.fragments,
+        p.covered_texels as f64 / 1e6,
+        args.quality,
+        base.seconds,
+        base_bytes as f64 / 1e6
+    );
+    println!(
+        "  {:<24} {:>8} {:>7} | {:>6} {:>6} {:>6} | {:>6} {:>6} {:>6} | {:>6} {:>6}",
+        "fragment quality",
+        "bytes",
+        "q",
+        "PSNR",
+        "feat.",
+        "plain",
+        "SSIM",
+        "feat.",
+        "plain",
+        "feat.",
+        "plain"
+    );
+    for &spread in &args.spreads {
+        let v = build(scan, dir, args.quality, spread)?;
+        let bytes = v.all().jpeg_bytes;
+        let (f, p) = (v.report.featured, v.report.plain);
+        println!(
+            "  {:<24} {:>7.3}M {:>7} | {:>6.2} {:>6.2} {:>6.2} | {:>6.4} {:>6.4} {:>6.4} | {:>5.3}M {:>5.3}M",
+            format!("by features, ΔQ {spread}"),
+            bytes as f64 / 1e6,
+            format!("{}–{}", v.report.quality.0, v.report.quality.2),
+            v.all().psnr(),
+            f.psnr(),
+            p.psnr(),
+            v.all().ssim(),
+            f.ssim(),
+            p.ssim(),
+            f.jpeg_bytes as f64 / 1e6,
+            p.jpeg_bytes as f64 / 1e6,
+        );
+        // Uniform quality at the same bytes: bisect the integer quality, then interpolate.
+        let (mut lo, mut hi) = (5u8, 100u8);
+        if uniform_at(lo, &mut uniform)? > bytes || uniform_at(hi, &mut uniform)? < bytes {
+            println!("    (no uniform quality within 5–100 takes {bytes} bytes)");
+            continue;
+        }
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if uniform_at(mid, &mut uniform)? <= bytes {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let (a, b) = (&uniform[&lo], &uniform[&hi]);
+        let (ba, bb) = (a.all().jpeg_bytes as f64, b.all().jpeg_bytes as f64);
+        let t = if bb > ba {
+            (bytes as f64 - ba) / (bb - ba)
+        } else {
+            0.0
+        };
+        let mix = |pick: &dyn Fn(&Measured) -> f64| pick(a) + (pick(b) - pick(a)) * t;
+        println!(
+            "  {:<24} {:>7.3}M {:>7} | {:>6.2} {:>6.2} {:>6.2} | {:>6.4} {:>6.4} {:>6.4} | {:>5.3}M {:>5.3}M",
+            "  uniform, same bytes",
+            bytes as f64 / 1e6,
+            format!("{:.1}", f64::from(lo) + t),
+            mix(&|m| m.all().psnr()),
+            mix(&|m| m.report.featured.psnr()),
+            mix(&|m| m.report.plain.psnr()),
+            mix(&|m| m.all().ssim()),
+            mix(&|m| m.report.featured.ssim()),
+            mix(&|m| m.report.plain.ssim()),
+            mix(&|m| m.report.featured.jpeg_bytes as f64) / 1e6,
+            mix(&|m| m.report.plain.jpeg_bytes as f64) / 1e6,
+        );
+    }
+    println!(
+        "  (bytes: the atlases' JPEGs; PSNR and luminance SSIM over the covered texels; \
+         \"feat.\": fragments at or above their level's mean feature value, the same fragments \
+         in every build)"
+    );
+    Ok(())
+}
