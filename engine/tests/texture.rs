@@ -412,4 +412,52 @@ fn bali_mask_close_up_at_one_pixel_matches_the_source_texture() {
         worst = worst.min(p_tex);
     }
     assert!(worst >= 32.0, "worst close-up {worst:.2} dB");
+
+    // The whole mask, small: coarse patches, whose atlases are resampled from the finer
+    // levels (not the source), against the source supersampled 4×4.
+    let (w, h, ss) = (128u32, 128u32, 4u32);
+    let cam = |scale: u32| Camera {
+        eye: centre + Vec3::new(0.1, 0.1, 1.0).normalize() * radius * 2.6,
+        target: centre,
+        up: Vec3::Y,
+        fovy_deg: 40.0,
+        width: w * scale,
+        height: h * scale,
+    };
+    let fine = reference(&src, &cam(ss));
+    let want: Vec<[u8; 4]> = (0..(w * h) as usize)
+        .map(|i| {
+            let (x, y) = (i % w as usize, i / w as usize);
+            let mut acc = [0f32; 3];
+            for dy in 0..ss as usize {
+                for dx in 0..ss as usize {
+                    let c = fine[(y * ss as usize + dy) * (w * ss) as usize + x * ss as usize + dx];
+                    for k in 0..3 {
+                        acc[k] += mesh::srgb_to_linear(c[k]);
+                    }
+                }
+            }
+            let n = (ss * ss) as f32;
+            encode_rgba([acc[0] / n, acc[1] / n, acc[2] / n, 1.0])
+        })
+        .collect();
+    let got = r.render(&tex_model, &cam(1), &opts, &[]).expect("render");
+    let old = r.render(&plain_model, &cam(1), &opts, &[]).expect("render");
+    let p_tex = psnr(got.color.as_ref().expect("colour"), &want);
+    let p_old = psnr(old.color.as_ref().expect("colour"), &want);
+    eprintln!(
+        "whole mask at {w}x{h}: PSNR against the source texture (4x4 supersampled): atlases \
+         {p_tex:.2} dB, vertex colours {p_old:.2} dB ({} vs {} triangles drawn)",
+        got.stats.triangles, old.stats.triangles
+    );
+    assert!(
+        got.stats.triangles < src.mesh.triangle_count() as u64 / 2,
+        "the far view draws coarse patches"
+    );
+    // Triangles are about pixel-sized here, so vertex colours are nearly as good; resampled
+    // atlases that lost their colour (white, or another chart's) fall far below both.
+    assert!(
+        p_tex >= 28.0 && p_tex + 0.5 >= p_old,
+        "atlases {p_tex:.2} dB, vertex colours {p_old:.2} dB"
+    );
 }

@@ -16,7 +16,8 @@
 //!    [`MAX_TEXELS`].
 //! 3. **Baking**: every texel whose centre lies in a triangle samples the colour source at
 //!    its barycentric coordinates (2×2 supersampled when resampling a finer surface, a box
-//!    filter for the halved density); every triangle owns at least the texel of its
+//!    filter for the halved density, with one closest-point query a texel:
+//!    [`Resampled::sample_box`]); every triangle owns at least the texel of its
 //!    centroid; [`GUTTER`] dilation passes then fill the gutter from the chart itself, so
 //!    bilinear filtering never mixes in another chart, and the rest is filled by push-pull,
 //!    a smooth continuation of the charts (cheap for JPEG: no step along every chart).
@@ -24,7 +25,7 @@
 //! Texel size follows the patch's error (`build.rs`): a patch is drawn while its error
 //! projects to at most a pixel, so texels of that size keep a texel per pixel or better.
 
-use super::nearest::Nearest;
+use super::nearest::{Hit, Nearest};
 use crate::mesh::{SourceTexture, Texture, TexturedFace, Wrap, encode_rgba, srgb_to_linear};
 use glam::{Vec2, Vec3};
 use rustc_hash::FxHashMap as HashMap;
@@ -70,6 +71,24 @@ impl PatchTexture {
 pub trait ColorSource {
     /// Linear RGBA of the surface at barycentric `bary` of triangle `tri` of the patch baked.
     fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4];
+
+    /// Mean linear RGBA over the points `points` of triangle `tri`, all within a texel of
+    /// `centre` (a texel's supersamples): by default, one [`ColorSource::sample`] each.
+    fn sample_box(&self, tri: usize, centre: [f32; 3], points: &[[f32; 3]]) -> [f32; 4] {
+        let _ = centre;
+        mean(points.iter().map(|&b| self.sample(tri, b)))
+    }
+}
+
+fn mean(samples: impl Iterator<Item = [f32; 4]>) -> [f32; 4] {
+    let (mut acc, mut n) = ([0f32; 4], 0usize);
+    for s in samples {
+        for k in 0..4 {
+            acc[k] += s[k];
+        }
+        n += 1;
+    }
+    acc.map(|a| a / n.max(1) as f32)
 }
 
 /// Charts packed into an atlas: its size and every corner's position in texels.
@@ -320,16 +339,12 @@ pub fn bake(layout: &Layout, source: &dyn ColorSource, supersample: bool) -> Pat
     let (w, h) = (layout.width as usize, layout.height as usize);
     let mut texels = vec![[0f32; 4]; w * h];
     let mut filled = vec![false; w * h];
-    let offsets: &[Vec2] = if supersample {
-        &[
-            Vec2::new(-0.25, -0.25),
-            Vec2::new(0.25, -0.25),
-            Vec2::new(-0.25, 0.25),
-            Vec2::new(0.25, 0.25),
-        ]
-    } else {
-        &[Vec2::ZERO]
-    };
+    let offsets: &[Vec2; 4] = &[
+        Vec2::new(-0.25, -0.25),
+        Vec2::new(0.25, -0.25),
+        Vec2::new(-0.25, 0.25),
+        Vec2::new(0.25, 0.25),
+    ];
     for (tri, c) in layout.corners.chunks_exact(3).enumerate() {
         let (c0, c1, c2) = (c[0], c[1], c[2]);
         let d = (c1.y - c2.y) * (c0.x - c2.x) + (c2.x - c1.x) * (c0.y - c2.y);
@@ -342,15 +357,11 @@ pub fn bake(layout: &Layout, source: &dyn ColorSource, supersample: bool) -> Pat
             [b0, b1, 1.0 - b0 - b1]
         };
         let value = |p: Vec2| {
-            let mut acc = [0f32; 4];
-            for o in offsets {
-                let s = source.sample(tri, bary(p + *o));
-                for k in 0..4 {
-                    acc[k] += s[k];
-                }
+            if !supersample {
+                return source.sample(tri, bary(p));
             }
-            let n = offsets.len() as f32;
-            acc.map(|a| a / n)
+            let points = [0, 1, 2, 3].map(|k| bary(p + offsets[k]));
+            source.sample_box(tri, bary(p), &points)
         };
         let lo = c0.min(c1).min(c2).floor().max(Vec2::ZERO);
         let hi = c0.max(c1).max(c2).ceil();
@@ -647,25 +658,91 @@ pub struct Resampled<'a> {
     pub last: std::cell::Cell<Option<u32>>,
 }
 
+impl Resampled<'_> {
+    /// The coarse triangle `tri`'s corners and unit normal.
+    fn corners(&self, tri: usize) -> ([Vec3; 3], Vec3) {
+        let p = |k: usize| Vec3::from(self.positions[self.indices[tri * 3 + k] as usize]);
+        let c = [p(0), p(1), p(2)];
+        (c, (c[1] - c[0]).cross(c[2] - c[0]).normalize_or_zero())
+    }
+
+    /// The closest finer point to `q` facing like `n` (any, where none faces that way).
+    fn closest(&self, q: Vec3, n: Vec3) -> Option<Hit> {
+        let nearest = &self.finer.nearest;
+        let hit = nearest
+            .closest_near(q, n, 0.0, self.last.get())
+            .or_else(|| nearest.closest(q, Vec3::ZERO, 0.0))?;
+        self.last.set(Some(hit.triangle));
+        Some(hit)
+    }
+
+    fn finer_sample(&self, triangle: u32, bary: [f32; 3]) -> [f32; 4] {
+        let (m, t) = self.finer.owners[triangle as usize];
+        self.finer.finer[m as usize].sample(t as usize, bary)
+    }
+}
+
+fn at(c: &[Vec3; 3], b: [f32; 3]) -> Vec3 {
+    c[0] * b[0] + c[1] * b[1] + c[2] * b[2]
+}
+
+/// Barycentric coordinates of `p` projected onto the plane of triangle `t` (outside it where
+/// `p` is); `None` for a degenerate triangle.
+fn plane_bary(p: Vec3, t: &[Vec3; 3]) -> Option<[f32; 3]> {
+    let (e0, e1, e2) = (t[1] - t[0], t[2] - t[0], p - t[0]);
+    let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let (d20, d21) = (e2.dot(e0), e2.dot(e1));
+    let denom = d00 * d11 - d01 * d01;
+    if denom <= f32::EPSILON * d00 * d11 || denom <= 0.0 {
+        return None;
+    }
+    let v = (d11 * d20 - d01 * d21) / denom;
+    let w = (d00 * d21 - d01 * d20) / denom;
+    Some([1.0 - v - w, v, w])
+}
+
+/// A supersample lands this far outside the finer triangle of the texel's centre (in
+/// barycentric units) before it gets a closest-point query of its own.
+const EXTRAPOLATE: f32 = 0.5;
+
 impl ColorSource for Resampled<'_> {
     fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4] {
-        let p = |k: usize| Vec3::from(self.positions[self.indices[tri * 3 + k] as usize]);
-        let (a, b, c) = (p(0), p(1), p(2));
-        let q = a * bary[0] + b * bary[1] + c * bary[2];
-        let n = (b - a).cross(c - a).normalize_or_zero();
-        let surface = self.finer;
-        let hit = surface
-            .nearest
-            .closest_near(q, n, 0.0, self.last.get())
-            .or_else(|| surface.nearest.closest(q, Vec3::ZERO, 0.0));
-        match hit {
-            Some(h) => {
-                self.last.set(Some(h.triangle));
-                let (m, t) = surface.owners[h.triangle as usize];
-                surface.finer[m as usize].sample(t as usize, h.bary)
-            }
+        let (c, n) = self.corners(tri);
+        match self.closest(at(&c, bary), n) {
+            Some(h) => self.finer_sample(h.triangle, h.bary),
             None => [1.0; 4],
         }
+    }
+
+    /// One closest-point query for the texel's centre; each supersample is that point moved
+    /// by the supersample's offset on the coarse surface, in the plane of the finer triangle
+    /// found. The finer atlas is an orthogonal projection of each chart, so the triangle's
+    /// texture coordinates carry on across its neighbours in the chart, and into the chart's
+    /// gutter beyond it. A supersample that would land far outside the triangle (a sliver,
+    /// or a fold of the finer surface) gets its own query instead: a quarter of the queries
+    /// of four independent samples, and the same colours where the finer surface is smooth.
+    fn sample_box(&self, tri: usize, centre: [f32; 3], points: &[[f32; 3]]) -> [f32; 4] {
+        let (c, n) = self.corners(tri);
+        let q = at(&c, centre);
+        let Some(hit) = self.closest(q, n) else {
+            return [1.0; 4];
+        };
+        let Some(ft) = self.finer.nearest.triangle(hit.triangle) else {
+            return self.finer_sample(hit.triangle, hit.bary);
+        };
+        let x = at(ft, hit.bary);
+        mean(points.iter().map(|&b| {
+            let p = at(&c, b);
+            match plane_bary(x + (p - q), ft) {
+                Some(fb) if fb.iter().all(|&v| v >= -EXTRAPOLATE) => {
+                    self.finer_sample(hit.triangle, fb)
+                }
+                _ => match self.closest(p, n) {
+                    Some(h) => self.finer_sample(h.triangle, h.bary),
+                    None => [1.0; 4],
+                },
+            }
+        }))
     }
 }
 

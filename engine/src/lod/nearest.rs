@@ -41,6 +41,11 @@ pub struct Hit {
 }
 
 impl Nearest {
+    /// Corner positions of triangle `t` (as given to [`Nearest::new`]).
+    pub fn triangle(&self, t: u32) -> Option<&[Vec3; 3]> {
+        self.tris.get(t as usize)
+    }
+
     pub fn new(tris: Vec<[Vec3; 3]>) -> Nearest {
         let normals = tris
             .iter()
