@@ -32,6 +32,10 @@ use rustc_hash::FxHashMap as HashMap;
 
 /// Texels of gutter around each chart.
 pub const GUTTER: u32 = 2;
+/// Chart rectangles are whole JPEG blocks (8×8 luminance texels), so no block holds two
+/// charts' texels: a block that does costs as much as a detailed one, and most of a small
+/// chart's blocks are on its edge.
+const BLOCK: u32 = 8;
 /// Most texels of one patch's atlas (2048²): bounds the build's memory per patch.
 pub const MAX_TEXELS: u64 = 1 << 22;
 /// Longest atlas side.
@@ -297,7 +301,7 @@ fn pack(positions: &[[f32; 3]], indices: &[u32], charts: &[Chart], texel_size: f
         let ext = (hi - lo).max(Vec2::ZERO);
         let w = (ext.x.ceil() as u32).saturating_add(2 * GUTTER + 1);
         let h = (ext.y.ceil() as u32).saturating_add(2 * GUTTER + 1);
-        rects.push((w, h, ci));
+        rects.push((w.next_multiple_of(BLOCK), h.next_multiple_of(BLOCK), ci));
     }
     rects.sort_by(|a, b| b.1.cmp(&a.1).then(b.0.cmp(&a.0)));
     let area: f64 = rects.iter().map(|r| r.0 as f64 * r.1 as f64).sum();
