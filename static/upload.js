@@ -15,6 +15,18 @@
   var forms = document.querySelectorAll("form[data-upload]");
   for (var i = 0; i < forms.length; i++) bind(forms[i]);
 
+  // The form's build options (empty fields: the server's defaults), as POST .../finish takes them.
+  function buildOptions(form) {
+    var build = {};
+    var simplifier = form.querySelector("[name=simplifier]");
+    if (simplifier && simplifier.value) build.simplifier = simplifier.value;
+    ["patch_triangles", "texture_quality", "texture_spread"].forEach(function (name) {
+      var input = form.querySelector("[name=" + name + "]");
+      if (input && input.value.trim() !== "") build[name] = Number(input.value);
+    });
+    return build;
+  }
+
   function mb(n) { return (n / 1048576).toFixed(1) + " MB"; }
   function sleep(ms) { return new Promise(function (r) { setTimeout(r, ms); }); }
 
@@ -194,6 +206,7 @@
         title: (form.querySelector("[name=title]") || {}).value || "",
         description: (form.querySelector("[name=description]") || {}).value || "",
       };
+      body.build = buildOptions(form);
       var res = await api("POST", "/api/v1/uploads/" + s.id + "/finish", body);
       var answer = await res.text();
       if (res.status !== 202) {

@@ -5,13 +5,80 @@
 
 use std::time::Duration;
 
+use meshwiki_engine::lod::segsimplify::Simplifier;
+use serde::Deserialize;
+use utoipa::{IntoParams, ToSchema};
+
 use super::{App, AppError};
 use crate::jobs::archive::{self, ReceivedFile};
 use crate::jobs::{MAX_SCAN_FILES, SCAN_EXTENSIONS, UploadTarget, companion_path, scan_extension};
-use crate::store::jobs::Job;
+use crate::store::jobs::{Job, JobOptions};
 use crate::store::models::{Model, NewModel};
 use crate::upload_sessions::{SessionError, SessionFile, SessionState};
 use crate::uploads::TempUpload;
+
+/// Build options the uploader of a scan may choose; the server keeps its memory budget and
+/// threads. Every field is optional: the server's default where absent.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize, ToSchema, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct BuildChoices {
+    /// How the levels are simplified: `quadric` (edge collapses, the default) or `segments`
+    /// (the mesh-segmentation paper's segment-driven vertex removal).
+    #[serde(default)]
+    pub simplifier: Option<Simplifier>,
+    /// Triangle budget of every patch (256–65536; default the server's, 4096 unless
+    /// configured): smaller patches refine more finely and cost more requests.
+    #[serde(default)]
+    pub patch_triangles: Option<u32>,
+    /// JPEG quality (1–100) of a textured scan's atlases, the mean of each level's (default 85).
+    #[serde(default)]
+    pub texture_quality: Option<u8>,
+    /// How far an atlas' quality moves with the density of features of its patch (0–50; 0:
+    /// every atlas the same quality; default 10).
+    #[serde(default)]
+    pub texture_spread: Option<u8>,
+}
+
+/// Smallest patch triangle budget an upload may ask for.
+pub const MIN_PATCH_TRIANGLES: u32 = 256;
+/// Largest patch triangle budget (the engine's limit).
+pub const MAX_PATCH_TRIANGLES: u32 = 1 << 16;
+/// Largest texture spread an upload may ask for.
+pub const MAX_TEXTURE_SPREAD: u8 = 50;
+
+impl BuildChoices {
+    /// The job options these choices make, or why they cannot be built.
+    pub fn job_options(&self) -> Result<JobOptions, AppError> {
+        if let Some(n) = self.patch_triangles
+            && !(MIN_PATCH_TRIANGLES..=MAX_PATCH_TRIANGLES).contains(&n)
+        {
+            return Err(AppError::invalid(format!(
+                "patch_triangles must be {MIN_PATCH_TRIANGLES} to {MAX_PATCH_TRIANGLES}, not {n}"
+            )));
+        }
+        if let Some(q) = self.texture_quality
+            && !(1..=100).contains(&q)
+        {
+            return Err(AppError::invalid(format!(
+                "texture_quality must be 1 to 100, not {q}"
+            )));
+        }
+        if let Some(s) = self.texture_spread
+            && s > MAX_TEXTURE_SPREAD
+        {
+            return Err(AppError::invalid(format!(
+                "texture_spread must be 0 to {MAX_TEXTURE_SPREAD}, not {s}"
+            )));
+        }
+        Ok(JobOptions {
+            simplifier: self.simplifier,
+            max_patch_triangles: self.patch_triangles,
+            texture_quality: self.texture_quality,
+            texture_spread: self.texture_spread,
+            ..JobOptions::default()
+        })
+    }
+}
 
 /// The model a scan is for.
 #[derive(Debug, Clone)]
@@ -43,13 +110,16 @@ impl From<SessionError> for AppError {
 
 impl App {
     /// Queues the build of a received scan: `files` as uploaded (one scan and the files it
-    /// refers to, or one `.zip` of them), for a new or an existing model.
+    /// refers to, or one `.zip` of them), for a new or an existing model, built with the
+    /// uploader's `choices` (refused with a message when out of range).
     pub async fn submit_scan(
         &self,
         files: Vec<ReceivedFile>,
         target: ScanFor,
+        choices: &BuildChoices,
         user: i64,
     ) -> Result<(Model, Job), AppError> {
+        let options = choices.job_options()?;
         if let ScanFor::Existing(id) = target {
             // Before unpacking anything: a model that cannot take a scan is refused at once.
             let model = crate::store::models::get(&self.db, id).await?;
@@ -72,7 +142,7 @@ impl App {
             }
             ScanFor::Existing(id) => UploadTarget::Existing(id),
         };
-        Ok(self.jobs.submit_upload(scan, target, user).await?)
+        Ok(self.jobs.submit_upload(scan, target, options, user).await?)
     }
 
     /// Opens a resumable upload of `files` (relative paths and sizes): one scan with the files
@@ -132,7 +202,10 @@ impl App {
         user: i64,
         id: &str,
         target: ScanFor,
+        choices: &BuildChoices,
     ) -> Result<(Model, Job), AppError> {
+        // Refused before the session is taken: the files stay for a corrected request.
+        choices.job_options()?;
         if let ScanFor::Existing(model_id) = target {
             let model = crate::store::models::get(&self.db, model_id).await?;
             crate::store::jobs::check_takes_scan(&model)?;
@@ -156,7 +229,7 @@ impl App {
         .await
         .map_err(AppError::internal)?
         .map_err(AppError::internal)?;
-        self.submit_scan(files, target, user).await
+        self.submit_scan(files, target, choices, user).await
     }
 
     /// Removes upload sessions idle for longer than their lifetime, now and every `every`.

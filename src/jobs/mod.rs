@@ -552,12 +552,14 @@ impl Jobs {
         }
     }
 
-    /// Stores an uploaded scan and queues its build, for a new model or for an existing one
-    /// without a built scan (see [`jobs::create_for_model`]); returns the model and the job.
+    /// Stores an uploaded scan and queues its build with `options`, for a new model or for an
+    /// existing one without a built scan (see [`jobs::create_for_model`]); returns the model
+    /// and the job.
     pub async fn submit_upload(
         &self,
         scan: ReceivedScan,
         target: UploadTarget<'_>,
+        options: JobOptions,
         user_id: i64,
     ) -> Result<(Model, Job), JobError> {
         let uploads = self.inner.settings.uploads_dir();
@@ -612,7 +614,7 @@ impl Jobs {
             source_path: Some(rel),
             source_name: display_name,
             source_bytes: bytes.min(i64::MAX as u64) as i64,
-            options: JobOptions::default(),
+            options,
             running_pid: None,
         };
         let created = match target {

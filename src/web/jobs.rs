@@ -19,12 +19,13 @@ use utoipa::{IntoParams, ToSchema};
 use super::auth::Auth;
 use super::multipart;
 use super::{ApiError, AppState, PageQuery};
-use crate::app::uploads::ScanFor;
+use crate::app::uploads::{BuildChoices, ScanFor};
 use crate::jobs::archive::ReceivedFile;
 use crate::jobs::{JobError, SCAN_EXTENSIONS, scan_extension};
 use crate::store::jobs::{self, CancelOutcome, Job, JobStatus};
 use crate::store::models::Model;
 use crate::store::users::Role;
+use meshwiki_engine::lod::segsimplify::Simplifier;
 
 /// Mounts the routes (before `models`: `/api/v1/models/upload` must win over `/{id}`).
 pub fn configure(cfg: &mut web::ServiceConfig) {
@@ -102,6 +103,26 @@ struct UploadQuery {
     /// Description of the model (Markdown).
     #[serde(default)]
     description: String,
+    /// How the levels are simplified: `quadric` (the default) or `segments`.
+    #[param(value_type = Option<String>)]
+    simplifier: Option<Simplifier>,
+    /// Triangle budget of every patch (256–65536; default the server's).
+    patch_triangles: Option<u32>,
+    /// JPEG quality (1–100) of a textured scan's atlases (default 85).
+    texture_quality: Option<u8>,
+    /// How far an atlas' quality moves with its patch's feature density (0–50; default 10).
+    texture_spread: Option<u8>,
+}
+
+impl UploadQuery {
+    fn build(&self) -> BuildChoices {
+        BuildChoices {
+            simplifier: self.simplifier,
+            patch_triangles: self.patch_triangles,
+            texture_quality: self.texture_quality,
+            texture_spread: self.texture_spread,
+        }
+    }
 }
 
 /// What an upload created: the model (status `pending`) and the job that builds it.
@@ -126,6 +147,8 @@ pub struct UploadedModel {
     responses(
         (status = 202, description = "Queued", body = UploadedModel,
             headers(("Location" = String, description = "The job: /api/v1/jobs/{id}"))),
+        (status = 400, description = "No filename, an empty body, or a build option out of range",
+            body = super::openapi::ErrorBody),
         (status = 409, description = "`model` already has a built scan, or a build queued or running",
             body = super::openapi::ErrorBody),
         (status = 413, description = "Larger than --max-model-upload-mb",
@@ -139,6 +162,9 @@ async fn upload(
     payload: web::Payload,
 ) -> Result<HttpResponse, ApiError> {
     auth.require(Role::Admin)?;
+    // Before the body is read: options out of range are refused at once.
+    let build = q.build();
+    build.job_options().map_err(ApiError::from)?;
     let title = match q.model {
         Some(_) => String::new(),
         None => check_title(
@@ -183,7 +209,9 @@ async fn upload(
             description: q.description.clone(),
         },
     };
-    let (model, job) = state.submit_scan(vec![file], target, auth.id()).await?;
+    let (model, job) = state
+        .submit_scan(vec![file], target, &build, auth.id())
+        .await?;
     Ok(HttpResponse::Accepted()
         .insert_header((header::LOCATION, format!("/api/v1/jobs/{}", job.id)))
         .json(UploadedModel { model, job }))

@@ -21,7 +21,7 @@ use super::auth::Auth;
 use super::jobs::{UploadedModel, check_title};
 use super::openapi::ErrorBody;
 use super::{ApiError, AppState};
-use crate::app::uploads::ScanFor;
+use crate::app::uploads::{BuildChoices, ScanFor};
 use crate::store::users::Role;
 use crate::upload_sessions::{SessionError, SessionFile, SessionState};
 
@@ -128,6 +128,9 @@ pub struct FinishUpload {
     pub description: String,
     /// An existing model (pending, or its build failed or was cancelled) to give the scan.
     pub model: Option<i64>,
+    /// Build options (each optional: the server's default where absent).
+    #[serde(default)]
+    pub build: BuildChoices,
 }
 
 fn session_error(e: SessionError) -> ApiError {
@@ -258,6 +261,7 @@ async fn append(
     responses(
         (status = 202, description = "Queued", body = UploadedModel,
             headers(("Location" = String, description = "The job: /api/v1/jobs/{id}"))),
+        (status = 400, description = "A file is incomplete, or a build option is out of range", body = ErrorBody),
         (status = 409, description = "`model` already has a built scan, or a build queued or running; or a chunk is being written",
             body = ErrorBody),
         (status = 413, description = "A .zip that unpacks beyond the limits", body = ErrorBody)),
@@ -273,6 +277,7 @@ async fn finish(
         title,
         description,
         model,
+        build,
     } = body.into_inner();
     let target = match model {
         Some(m) => ScanFor::Existing(m),
@@ -284,7 +289,7 @@ async fn finish(
             description,
         },
     };
-    let (model, job) = state.finish_upload(auth.id(), &id, target).await?;
+    let (model, job) = state.finish_upload(auth.id(), &id, target, &build).await?;
     Ok(HttpResponse::Accepted()
         .insert_header((header::LOCATION, format!("/api/v1/jobs/{}", job.id)))
         .json(UploadedModel { model, job }))

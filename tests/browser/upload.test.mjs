@@ -114,6 +114,10 @@ test('a glTF with its buffer and texture uploads through the page, with progress
   await page.route('**/api/v1/uploads/*/files/*', (route) => (++chunks === 2 ? route.abort('connectionreset') : route.continue()));
   await page.goto(`${server.base}/admin/jobs`);
   await page.fill('input[name=title]', 'Uploaded mask');
+  // Build options, folded away until opened.
+  await page.click('[data-build-options] summary');
+  await page.fill('input[name=texture_quality]', '70');
+  await page.fill('input[name=patch_triangles]', '2048');
   await page.setInputFiles('#scan-files', files);
   await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
   const progress = await poll(page, () => ({ value: Number(sessionStorage.getItem('mw-progress')), statuses: JSON.parse(sessionStorage.getItem('mw-statuses') || '[]') }), () => true);
@@ -127,6 +131,8 @@ test('a glTF with its buffer and texture uploads through the page, with progress
   assert.equal(model.status, 'ready', model.error);
   const jobs = await server.api.get('/api/v1/jobs?limit=1');
   assert.match(jobs[0].source_name, /\.gltf$/);
+  assert.equal(jobs[0].options.texture_quality, 70, 'the form\'s build options reached the build');
+  assert.equal(jobs[0].options.max_patch_triangles, 2048);
   await gotoSettled(page, `${server.base}/models/${id}`);
   const stats = await waitViewer(page, (s) => s.triangles > 0);
   assert.ok(stats.triangles > 0, 'the viewer draws the uploaded scan');

@@ -233,23 +233,41 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
     assert_eq!(r.status, 201, "{}", r.text());
     let id = r.json()["id"].as_str().unwrap().to_string();
     assert_eq!(chunk(&admin, &id, 0, 0, &archive).status, 204);
+    // Build options out of range are refused with their name, and the session stays.
+    let e = admin
+        .post(
+            &format!("/api/v1/uploads/{id}/finish"),
+            &json!({"title": "Zip session", "build": {"patch_triangles": 10}}),
+        )
+        .assert_error(400);
+    assert!(e.contains("patch_triangles"), "{e}");
     let r = admin.post(
         &format!("/api/v1/uploads/{id}/finish"),
-        &json!({"title": "Zip session"}),
+        &json!({"title": "Zip session", "build": {"patch_triangles": 256, "simplifier": "quadric"}}),
     );
     assert_eq!(r.status, 202, "{}", r.text());
-    models.push(r.json());
+    models.push((r.json(), Some(256)));
 
-    // The raw API.
+    // The raw API: options are query parameters, refused before the body is read.
+    let e = admin
+        .request(
+            "POST",
+            "/api/v1/models/upload?title=Zip%20raw&filename=relief.zip&texture_quality=0",
+            Some("application/zip"),
+            archive.clone(),
+            true,
+        )
+        .assert_error(400);
+    assert!(e.contains("texture_quality"), "{e}");
     let r = admin.request(
         "POST",
-        "/api/v1/models/upload?title=Zip%20raw&filename=relief.zip",
+        "/api/v1/models/upload?title=Zip%20raw&filename=relief.zip&patch_triangles=300&texture_quality=70",
         Some("application/zip"),
         archive.clone(),
         true,
     );
     assert_eq!(r.status, 202, "{}", r.text());
-    models.push(r.json());
+    models.push((r.json(), Some(300)));
 
     // The page's form.
     let page = admin.get("/admin/jobs").text();
@@ -259,17 +277,39 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
         .and_then(|s| s.split('"').next())
         .unwrap()
         .to_string();
+    // A refused option comes back in the form with what was typed.
     let r = admin.upload_files(
         "/admin/jobs/upload",
-        &[("csrf_token", &csrf), ("title", "Zip form")],
+        &[
+            ("csrf_token", &csrf),
+            ("title", "Zip form"),
+            ("texture_spread", "99"),
+        ],
+        &[("relief.zip", "application/zip", &archive)],
+    );
+    assert_eq!(r.status, 400, "{}", r.text());
+    let page = r.text();
+    assert!(page.contains("texture_spread must be 0 to 50"), "{page}");
+    assert!(page.contains("value=\"99\"") && page.contains("value=\"Zip form\""));
+    let r = admin.upload_files(
+        "/admin/jobs/upload",
+        &[
+            ("csrf_token", &csrf),
+            ("title", "Zip form"),
+            ("simplifier", "segments"),
+        ],
         &[("relief.zip", "application/zip", &archive)],
     );
     assert_eq!(r.status, 303, "{}", r.text());
 
-    for j in &models {
+    for (j, patch) in &models {
         assert_eq!(j["model"]["source_name"], "scan.obj", "{j}");
         let job = wait_finished(&admin, j["job"]["id"].as_i64().unwrap(), 120);
         assert_eq!(job["status"], "done", "{job}");
+        // The options reached the build: 800 triangles make several patches of at most 300.
+        assert_eq!(job["options"]["max_patch_triangles"], json!(patch), "{job}");
+        let nodes = job["report"]["nodes"].as_u64().unwrap_or(0);
+        assert!(nodes > 2, "{nodes} nodes: {job}");
     }
     let list = admin.get("/api/v1/models").json();
     let titles: Vec<&str> = list
@@ -300,7 +340,9 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
         .unwrap()["id"]
         .as_i64()
         .unwrap();
-    assert_eq!(wait_finished(&admin, job, 120)["status"], "done");
+    let job = wait_finished(&admin, job, 120);
+    assert_eq!(job["status"], "done");
+    assert_eq!(job["options"]["simplifier"], "segments", "{job}");
     nothing_left(dir.path());
 }
 

@@ -10,7 +10,7 @@ use futures_util::StreamExt;
 
 use super::filters;
 use super::{CsrfOnly, Layout, redirect, render_status};
-use crate::app::uploads::ScanFor;
+use crate::app::uploads::{BuildChoices, ScanFor};
 use crate::jobs::archive::ReceivedFile;
 use crate::jobs::{MAX_SCAN_FILES, SCAN_EXTENSIONS, companion_path};
 use crate::store::Page;
@@ -21,6 +21,7 @@ use crate::web::auth::{PageAuth, PageForm};
 use crate::web::jobs::check_title;
 use crate::web::multipart::{TextFields, multipart_error};
 use crate::web::{ApiError, AppState, PageError};
+use meshwiki_engine::lod::segsimplify::Simplifier;
 
 /// Mounts the routes.
 pub fn configure(cfg: &mut web::ServiceConfig) {
@@ -65,9 +66,10 @@ struct JobsPage {
     jobs: Vec<JobView>,
     any_active: bool,
     error: String,
-    /// The upload form's title and description, kept after an error.
-    title: String,
-    description: String,
+    /// The upload form's text, kept after an error.
+    kept: Kept,
+    /// The server's patch triangle budget (the form's placeholder).
+    default_patch_triangles: u32,
     max_upload_mb: u64,
     extensions: &'static str,
 }
@@ -77,6 +79,44 @@ struct JobsPage {
 struct Kept {
     title: String,
     description: String,
+    /// The build options as typed (text, so a refused value comes back as it was).
+    simplifier: String,
+    patch_triangles: String,
+    texture_quality: String,
+    texture_spread: String,
+}
+
+impl Kept {
+    /// The build options of the form: empty fields are the server's defaults.
+    fn build(&self) -> Result<BuildChoices, ApiError> {
+        fn number<T: std::str::FromStr>(name: &str, v: &str) -> Result<Option<T>, ApiError> {
+            let v = v.trim();
+            if v.is_empty() {
+                return Ok(None);
+            }
+            v.parse()
+                .map(Some)
+                .map_err(|_| ApiError::bad(format!("{name} must be a whole number, not {v:?}")))
+        }
+        let simplifier = match self.simplifier.trim() {
+            "" => None,
+            "quadric" => Some(Simplifier::Quadric),
+            "segments" => Some(Simplifier::Segments),
+            other => {
+                return Err(ApiError::bad(format!(
+                    "simplifier must be quadric or segments, not {other:?}"
+                )));
+            }
+        };
+        let build = BuildChoices {
+            simplifier,
+            patch_triangles: number("patch_triangles", &self.patch_triangles)?,
+            texture_quality: number("texture_quality", &self.texture_quality)?,
+            texture_spread: number("texture_spread", &self.texture_spread)?,
+        };
+        build.job_options()?;
+        Ok(build)
+    }
 }
 
 async fn jobs_page(
@@ -111,8 +151,8 @@ async fn jobs_page(
             any_active: jobs.iter().any(|j| j.active),
             jobs,
             error,
-            title: kept.title,
-            description: kept.description,
+            kept,
+            default_patch_triangles: state.settings.build.max_patch_triangles,
             max_upload_mb: state.settings.build.upload_bytes >> 20,
             extensions: SCAN_EXTENSIONS,
         },
@@ -134,8 +174,8 @@ async fn page(state: web::Data<AppState>, auth: PageAuth) -> Result<HttpResponse
 /// The upload form as read.
 struct UploadForm {
     files: Vec<ReceivedFile>,
-    title: String,
-    description: String,
+    /// The text fields.
+    kept: Kept,
     /// An existing model to give the scan (a retry).
     model: Option<i64>,
 }
@@ -149,17 +189,17 @@ async fn receive_form(
 ) -> Result<UploadForm, (ApiError, Kept)> {
     let mut fields = TextFields::new();
     let read = read_form(state, auth, form, &mut fields).await;
+    let mut take = |name: &str| fields.remove(name).unwrap_or_default();
     let kept = Kept {
-        title: fields.remove("title").unwrap_or_default(),
-        description: fields.remove("description").unwrap_or_default(),
+        title: take("title"),
+        description: take("description"),
+        simplifier: take("simplifier"),
+        patch_triangles: take("patch_triangles"),
+        texture_quality: take("texture_quality"),
+        texture_spread: take("texture_spread"),
     };
     match read {
-        Ok((files, model)) => Ok(UploadForm {
-            files,
-            title: kept.title,
-            description: kept.description,
-            model,
-        }),
+        Ok((files, model)) => Ok(UploadForm { files, kept, model }),
         Err(e) => Err((e, kept)),
     }
 }
@@ -254,28 +294,29 @@ async fn page_upload(
             return jobs_page(&state, &auth, e.status_code(), e.message(), kept).await;
         }
     };
-    let UploadForm {
-        files,
-        title,
-        description,
-        model,
-    } = form;
+    let UploadForm { files, kept, model } = form;
     // What the person typed comes back with an error, so a refused upload loses nothing.
-    let kept = Kept {
-        title: title.clone(),
-        description: description.clone(),
+    let build = match kept.build() {
+        Ok(b) => b,
+        Err(e) => {
+            drop(files);
+            return jobs_page(&state, &auth, e.status_code(), e.message(), kept).await;
+        }
     };
     let target = match model {
         Some(id) => ScanFor::Existing(id),
-        None => match check_title(&title, state.settings.limits.title_chars) {
-            Ok(title) => ScanFor::New { title, description },
+        None => match check_title(&kept.title, state.settings.limits.title_chars) {
+            Ok(title) => ScanFor::New {
+                title,
+                description: kept.description.clone(),
+            },
             Err(e) => {
                 drop(files);
                 return jobs_page(&state, &auth, StatusCode::BAD_REQUEST, e.message(), kept).await;
             }
         },
     };
-    match state.submit_scan(files, target, auth.id()).await {
+    match state.submit_scan(files, target, &build, auth.id()).await {
         Ok((model, _job)) => Ok(redirect(&format!("/models/{}", model.id))),
         Err(e) => {
             let e = ApiError::from(e);
