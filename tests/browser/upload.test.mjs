@@ -115,9 +115,10 @@ test('a glTF with its buffer and texture uploads through the page, with progress
   await page.goto(`${server.base}/admin/jobs`);
   await page.fill('input[name=title]', 'Uploaded mask');
   // Build options, folded away until opened.
-  await page.click('[data-build-options] summary');
-  await page.fill('input[name=texture_quality]', '70');
-  await page.fill('input[name=patch_triangles]', '2048');
+  const form = 'form[data-upload]:not(.retry)';
+  await page.click(`${form} [data-build-options] summary`);
+  await page.fill(`${form} input[name=texture_quality]`, '70');
+  await page.fill(`${form} input[name=patch_triangles]`, '2048');
   await page.setInputFiles('#scan-files', files);
   await Promise.all([page.waitForURL(/\/models\/\d+$/, { timeout: 120_000 }), page.click('form[data-upload] button[type=submit]')]);
   const progress = await poll(page, () => ({ value: Number(sessionStorage.getItem('mw-progress')), statuses: JSON.parse(sessionStorage.getItem('mw-statuses') || '[]') }), () => true);

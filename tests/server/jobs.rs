@@ -209,7 +209,13 @@ fn a_failed_or_cancelled_build_is_retried_with_a_new_scan_or_its_model_deleted()
     let good = std::fs::read(relief_ply(scans.path(), "r.ply", 4_000)).unwrap();
 
     // A broken scan fails; the jobs page offers to retry it or delete its model.
-    let r = upload_scan(&admin, "Gate", "gate.ply", good[..good.len() / 2].to_vec());
+    let r = admin.request(
+        "POST",
+        "/api/v1/models/upload?title=Gate&filename=gate.ply&patch_triangles=512&texture_quality=60",
+        Some("application/octet-stream"),
+        good[..good.len() / 2].to_vec(),
+        true,
+    );
     assert_eq!(r.status, 202, "{}", r.text());
     let (job, model) = (
         r.json()["job"]["id"].as_i64().unwrap(),
@@ -222,6 +228,18 @@ fn a_failed_or_cancelled_build_is_retried_with_a_new_scan_or_its_model_deleted()
             && page.contains(&format!("name=\"model\" value=\"{model}\""))
     );
     assert!(page.contains(&format!("action=\"/admin/models/{model}/delete\"")));
+    // The retry form offers the failed build's options again, unfolded.
+    let retry_form = page
+        .split("class=\"stack small retry\"")
+        .nth(1)
+        .and_then(|f| f.split("</form>").next())
+        .unwrap_or_default();
+    assert!(
+        retry_form.contains("data-build-options open")
+            && retry_form.contains("name=\"patch_triangles\" type=\"number\" min=\"256\" max=\"65536\" placeholder=\"4096\" value=\"512\"")
+            && retry_form.contains("placeholder=\"85\" value=\"60\""),
+        "{retry_form}"
+    );
 
     // Retried through the API with the whole scan: the same model, now ready.
     let r = admin.request(

@@ -14,7 +14,7 @@ use crate::app::uploads::{BuildChoices, ScanFor};
 use crate::jobs::archive::ReceivedFile;
 use crate::jobs::{MAX_SCAN_FILES, SCAN_EXTENSIONS, companion_path};
 use crate::store::Page;
-use crate::store::jobs::{self, Job, JobStatus};
+use crate::store::jobs::{self, Job, JobOptions, JobStatus};
 use crate::store::models::{self, ModelStatus};
 use crate::store::users::Role;
 use crate::web::auth::{PageAuth, PageForm};
@@ -45,6 +45,8 @@ pub struct JobView {
     /// The latest build of a model left without a built scan (failed or cancelled): the page
     /// offers to upload the scan again or to delete the model.
     pub retry: bool,
+    /// Its build options, offered again by the retry form.
+    pub build: BuildFields,
 }
 
 impl JobView {
@@ -54,6 +56,7 @@ impl JobView {
             active: !job.status.is_finished(),
             percent: format!("{:.1}", job.percent),
             retry: false,
+            build: BuildFields::of(&job.options),
             job,
         }
     }
@@ -79,16 +82,47 @@ struct JobsPage {
 struct Kept {
     title: String,
     description: String,
-    /// The build options as typed (text, so a refused value comes back as it was).
+    build: BuildFields,
+}
+
+/// The upload form's build options as text (so a refused value comes back as it was; empty:
+/// the server's default).
+#[derive(Debug, Clone, Default)]
+pub struct BuildFields {
     simplifier: String,
     patch_triangles: String,
     texture_quality: String,
     texture_spread: String,
 }
 
-impl Kept {
+impl BuildFields {
+    /// The options a job was built with.
+    fn of(options: &JobOptions) -> BuildFields {
+        fn text<T: ToString>(v: Option<T>) -> String {
+            v.map(|v| v.to_string()).unwrap_or_default()
+        }
+        BuildFields {
+            simplifier: text(options.simplifier.map(|s| s.as_str())),
+            patch_triangles: text(options.max_patch_triangles),
+            texture_quality: text(options.texture_quality),
+            texture_spread: text(options.texture_spread),
+        }
+    }
+
+    /// Whether any option differs from the server's default (the form shows them unfolded).
+    fn any(&self) -> bool {
+        [
+            &self.simplifier,
+            &self.patch_triangles,
+            &self.texture_quality,
+            &self.texture_spread,
+        ]
+        .iter()
+        .any(|v| !v.trim().is_empty())
+    }
+
     /// The build options of the form: empty fields are the server's defaults.
-    fn build(&self) -> Result<BuildChoices, ApiError> {
+    fn choices(&self) -> Result<BuildChoices, ApiError> {
         fn number<T: std::str::FromStr>(name: &str, v: &str) -> Result<Option<T>, ApiError> {
             let v = v.trim();
             if v.is_empty() {
@@ -108,14 +142,14 @@ impl Kept {
                 )));
             }
         };
-        let build = BuildChoices {
+        let choices = BuildChoices {
             simplifier,
             patch_triangles: number("patch_triangles", &self.patch_triangles)?,
             texture_quality: number("texture_quality", &self.texture_quality)?,
             texture_spread: number("texture_spread", &self.texture_spread)?,
         };
-        build.job_options()?;
-        Ok(build)
+        choices.job_options()?;
+        Ok(choices)
     }
 }
 
@@ -193,10 +227,12 @@ async fn receive_form(
     let kept = Kept {
         title: take("title"),
         description: take("description"),
-        simplifier: take("simplifier"),
-        patch_triangles: take("patch_triangles"),
-        texture_quality: take("texture_quality"),
-        texture_spread: take("texture_spread"),
+        build: BuildFields {
+            simplifier: take("simplifier"),
+            patch_triangles: take("patch_triangles"),
+            texture_quality: take("texture_quality"),
+            texture_spread: take("texture_spread"),
+        },
     };
     match read {
         Ok((files, model)) => Ok(UploadForm { files, kept, model }),
@@ -296,7 +332,7 @@ async fn page_upload(
     };
     let UploadForm { files, kept, model } = form;
     // What the person typed comes back with an error, so a refused upload loses nothing.
-    let build = match kept.build() {
+    let build = match kept.build.choices() {
         Ok(b) => b,
         Err(e) => {
             drop(files);
