@@ -186,3 +186,66 @@ test('a .zip cut off after its first chunk resumes when picked again after a rel
   assert.equal(model.triangle_count, 2 * 59 * 59);
   await closePage(page);
 });
+
+/** A binary PLY relief of about 2·n² triangles (a build of several seconds for n = 1000). */
+function reliefPly(path, n) {
+  const header = `ply\nformat binary_little_endian 1.0\nelement vertex ${n * n}\nproperty float x\nproperty float y\nproperty float z\nelement face ${2 * (n - 1) * (n - 1)}\nproperty list uchar int vertex_indices\nend_header\n`;
+  const vertices = Buffer.alloc(n * n * 12);
+  for (let y = 0, o = 0; y < n; y++) {
+    for (let x = 0; x < n; x++, o += 12) {
+      vertices.writeFloatLE(x / n, o);
+      vertices.writeFloatLE(y / n, o + 4);
+      vertices.writeFloatLE(0.05 * Math.sin(x * 0.07) * Math.cos(y * 0.05), o + 8);
+    }
+  }
+  const faces = Buffer.alloc(2 * (n - 1) * (n - 1) * 13);
+  let o = 0;
+  const face = (a, b, c) => {
+    faces.writeUInt8(3, o);
+    faces.writeInt32LE(a, o + 1);
+    faces.writeInt32LE(b, o + 5);
+    faces.writeInt32LE(c, o + 9);
+    o += 13;
+  };
+  for (let y = 0; y < n - 1; y++) {
+    for (let x = 0; x < n - 1; x++) {
+      const v = y * n + x;
+      face(v, v + 1, v + n + 1);
+      face(v, v + n + 1, v + n);
+    }
+  }
+  writeFileSync(path, Buffer.concat([Buffer.from(header), vertices, faces]));
+  return path;
+}
+
+test('the jobs page reloads when a build ends, but not over a form being filled in', { timeout: 300_000 }, async () => {
+  const ply = readFileSync(reliefPly(join(tmp, 'relief.ply'), 1000));
+  const start = async (title) => {
+    const res = await server.api.request('POST', `/api/v1/models/upload?title=${title}&filename=relief.ply`, { body: ply, headers: { 'Content-Type': 'application/octet-stream' }, raw: true });
+    assert.equal(res.status, 202, await res.clone().text());
+    return (await res.json()).job.id;
+  };
+  const statusOf = (page, id) => page.evaluate((jid) => document.getElementById(`job-${jid}`)?.getAttribute('data-job-status') ?? null, id);
+  const page = await browser.page();
+  await login(page, server.base, ADMIN);
+
+  // Something typed in the upload form: the build's end shows in its row, the page stays.
+  let job = await start('Busy');
+  await page.goto(`${server.base}/admin/jobs`);
+  assert.ok(['queued', 'running'].includes(await statusOf(page, job)), 'the build is still under way when the page opens');
+  await page.evaluate(() => { window.__kept = true; });
+  await page.fill('form[data-upload]:not(.retry) input[name=title]', 'Half typed');
+  await poll(page, (jid) => document.getElementById(`job-${jid}`)?.getAttribute('data-job-status'), (s) => s === 'done', 120_000, job);
+  await new Promise((r) => setTimeout(r, 2000));
+  assert.equal(await page.evaluate(() => window.__kept), true, 'the page was not reloaded');
+  assert.equal(await page.inputValue('form[data-upload]:not(.retry) input[name=title]'), 'Half typed');
+
+  // A page nobody typed into reloads to show the result.
+  job = await start('Idle');
+  await page.goto(`${server.base}/admin/jobs`);
+  assert.ok(['queued', 'running'].includes(await statusOf(page, job)), 'the build is still under way when the page opens');
+  await page.evaluate(() => { window.__kept = true; });
+  await poll(page, () => window.__kept === undefined, Boolean, 120_000);
+  assert.equal(await statusOf(page, job), 'done');
+  await closePage(page);
+});
