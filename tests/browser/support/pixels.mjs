@@ -82,7 +82,6 @@ export function holes(page, name, final, erode = 4) {
   }, { name, final, erode });
 }
 
-/** Compares frame `name` with an image URL (same origin), over pixels that are surface in both. */
 /** The server render (`GET /api/v1/models/{id}/render`) of the viewer's current camera at the
  * size of the captured `frame`. */
 export async function serverRenderUrl(page, modelId, frame) {
@@ -98,6 +97,7 @@ export async function serverRenderUrl(page, modelId, frame) {
   return `/api/v1/models/${modelId}/render?${q}`;
 }
 
+/** Compares frame `name` with an image URL (same origin), over pixels that are surface in both. */
 export function compareWithImage(page, name, url) {
   return page.evaluate(async ({ name, url }) => {
     const f = window.__frames[name];
@@ -115,15 +115,25 @@ export function compareWithImage(page, name, url) {
     let onlyOurs = 0;
     let onlyTheirs = 0;
     let diff = 0;
+    let squared = 0;
     for (let i = 0; i < f.w * f.h; i++) {
       const theirs = d[i * 4 + 3] > 128 && d[i * 4] + d[i * 4 + 1] + d[i * 4 + 2] > 0;
       if (f.surface[i] && theirs) {
         both++;
-        if (ours) diff += Math.abs(ours[i * 3] - d[i * 4]) + Math.abs(ours[i * 3 + 1] - d[i * 4 + 1]) + Math.abs(ours[i * 3 + 2] - d[i * 4 + 2]);
+        if (ours) {
+          for (let k = 0; k < 3; k++) {
+            const e = ours[i * 3 + k] - d[i * 4 + k];
+            diff += Math.abs(e);
+            squared += e * e;
+          }
+        }
       } else if (f.surface[i]) onlyOurs++;
       else if (theirs) onlyTheirs++;
     }
     const union = both + onlyOurs + onlyTheirs;
-    return { iou: union ? both / union : 1, meanAbsDiff: both && ours ? diff / (both * 3) : null, both, onlyOurs, onlyTheirs };
+    const mse = both && ours ? squared / (both * 3) : null;
+    // PSNR over the pixels both show (the silhouettes' agreement is `iou`).
+    const psnr = mse === null ? null : mse === 0 ? Infinity : 10 * Math.log10((255 * 255) / mse);
+    return { iou: union ? both / union : 1, meanAbsDiff: both && ours ? diff / (both * 3) : null, psnr, both, onlyOurs, onlyTheirs };
   }, { name, url });
 }
