@@ -4,7 +4,10 @@
 //! normals when the scan has none, and the mean edge length for the quantisation step.
 
 use super::spill::SpillVec;
-use crate::mesh::{ImportError, MeshSink, SourceInfo, SourceTexture, TexturedFace, VertexBatch};
+use crate::mesh::{
+    ImportError, MeshSink, SourceInfo, SourceTexture, TexturedFace, VertexBatch,
+    check_textured_faces,
+};
 use glam::Vec3;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -218,11 +221,7 @@ impl MeshSink for Ingest {
         triangles: &[[u32; 3]],
         faces: &[TexturedFace],
     ) -> Result<(), ImportError> {
-        if faces.len() != triangles.len() {
-            return Err(ImportError::sink(
-                "texture coordinates for a different face count",
-            ));
-        }
+        check_textured_faces(triangles, faces)?;
         let before = self.triangle_count;
         self.triangles(triangles)?;
         if let Some(uvs) = self.face_uvs.as_mut() {

@@ -30,7 +30,10 @@ mod texture;
 
 pub use error::{ImportError, ImportErrorKind, Location};
 pub use ply_write::{PlyLayout, PlyWriter, write_ply};
-pub use sink::{Mesh, MeshSink, NO_TEXTURE, SourceInfo, TexturedFace, TexturedMesh, VertexBatch};
+pub use sink::{
+    Mesh, MeshSink, NO_TEXTURE, SourceInfo, TexturedFace, TexturedMesh, VertexBatch,
+    check_textured_faces,
+};
 pub use synth::{Relief, generate_relief, write_relief_ply};
 pub use texture::{SourceTexture, Texture, Wrap, encode_rgba, linear_to_srgb, srgb_to_linear};
 

@@ -184,16 +184,25 @@ impl MeshSink for TexturedMesh {
         triangles: &[[u32; 3]],
         faces: &[TexturedFace],
     ) -> Result<(), ImportError> {
-        if faces.len() != triangles.len() {
-            return Err(ImportError::sink(format!(
-                "{} texture faces for {} triangles",
-                faces.len(),
-                triangles.len()
-            )));
-        }
+        check_textured_faces(triangles, faces)?;
         self.faces.extend_from_slice(faces);
         self.mesh.triangles(triangles)
     }
+}
+
+/// A sink's check of [`MeshSink::textured_triangles`]: one texture face per triangle.
+pub fn check_textured_faces(
+    triangles: &[[u32; 3]],
+    faces: &[TexturedFace],
+) -> Result<(), ImportError> {
+    if faces.len() == triangles.len() {
+        return Ok(());
+    }
+    Err(ImportError::sink(format!(
+        "{} texture faces for {} triangles",
+        faces.len(),
+        triangles.len()
+    )))
 }
 
 #[cfg(test)]
