@@ -10,7 +10,9 @@
 //!    unassigned triangle; a neighbour joins while its normal stays within 60° of the chart's
 //!    area-weighted mean normal (70° for triangles no larger than a texel or so). A chart is projected orthogonally onto the plane of that
 //!    normal (every triangle keeps its orientation, so nothing folds) and turned to its
-//!    principal axes for a tight rectangle.
+//!    principal axes for a tight rectangle. A chart of fewer than [`SMALL_CHART_TEXELS`]
+//!    texels then joins the neighbouring chart it shares most edges with, where it can be
+//!    projected along that chart's axis (within 75°).
 //! 2. **Packing**: rectangles with a gutter of [`GUTTER`] texels on every side, tallest first
 //!    on shelves; the texel size shrinks (coarser texels) until the atlas fits
 //!    [`MAX_TEXELS`].
@@ -134,7 +136,17 @@ struct Chart {
     /// In-plane axes (unit, orthogonal).
     u: Vec3,
     v: Vec3,
+    /// The direction it is projected along.
+    axis: Vec3,
 }
+
+/// A chart of fewer texels than this is merged into a neighbour it can be projected with
+/// (every triangle within [`MERGE_COS`] of the neighbour's axis): a chart of a few blocks is
+/// mostly edge, and every edge block costs as much as a detailed one.
+const SMALL_CHART_TEXELS: f32 = 256.0;
+/// A small chart's triangles may face this far (75°) from the axis of the chart it joins:
+/// their texels stretch up to 1/cos along the slope, on a few texels only.
+const MERGE_COS: f32 = 0.26;
 
 fn make_charts(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Vec<Chart> {
     let t = indices.len() / 3;
@@ -226,6 +238,7 @@ fn make_charts(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Vec<
             triangles: kept,
             u,
             v,
+            axis,
         });
     }
     // Triangles dropped from a chart after its growth: one chart each, or with neighbours.
@@ -239,9 +252,87 @@ fn make_charts(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Vec<
                 triangles: vec![f],
                 u,
                 v,
+                axis,
             });
         }
     }
+    merge_small_charts(
+        charts,
+        &mut chart_of,
+        &neighbours,
+        &normals,
+        &areas,
+        texel_size,
+        indices,
+        positions,
+    )
+}
+
+/// Merges every chart smaller than [`SMALL_CHART_TEXELS`] into the neighbouring chart it
+/// shares most edges with, where all its triangles face within [`MERGE_COS`] of that
+/// chart's axis (smallest first; a merged chart keeps its axis, its in-plane axes follow
+/// its new triangles).
+#[allow(clippy::too_many_arguments)]
+fn merge_small_charts(
+    mut charts: Vec<Chart>,
+    chart_of: &mut [u32],
+    neighbours: &[[u32; 3]],
+    normals: &[Vec3],
+    areas: &[f32],
+    texel_size: f32,
+    indices: &[u32],
+    positions: &[[f32; 3]],
+) -> Vec<Chart> {
+    let texel_area = texel_size * texel_size;
+    if !texel_area.is_normal() {
+        return charts;
+    }
+    let texels =
+        |c: &Chart| c.triangles.iter().map(|&f| areas[f as usize]).sum::<f32>() / texel_area;
+    let mut order: Vec<(f32, u32)> = charts
+        .iter()
+        .enumerate()
+        .map(|(i, c)| (texels(c), i as u32))
+        .filter(|&(n, _)| n < SMALL_CHART_TEXELS)
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut changed = vec![false; charts.len()];
+    for (_, small) in order {
+        let members = &charts[small as usize].triangles;
+        if members.is_empty() || texels(&charts[small as usize]) >= SMALL_CHART_TEXELS {
+            continue;
+        }
+        let mut shared: HashMap<u32, u32> = HashMap::default();
+        for &f in members {
+            for &nb in &neighbours[f as usize] {
+                if nb != u32::MAX && chart_of[nb as usize] != small {
+                    *shared.entry(chart_of[nb as usize]).or_default() += 1;
+                }
+            }
+        }
+        let mut candidates: Vec<(u32, u32)> = shared.into_iter().collect();
+        candidates.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+        let Some(&(target, _)) = candidates.iter().find(|&&(c, _)| {
+            let axis = charts[c as usize].axis;
+            members.iter().all(|&f| {
+                normals[f as usize] == Vec3::ZERO || normals[f as usize].dot(axis) >= MERGE_COS
+            })
+        }) else {
+            continue;
+        };
+        let moved = std::mem::take(&mut charts[small as usize].triangles);
+        for &f in &moved {
+            chart_of[f as usize] = target;
+        }
+        charts[target as usize].triangles.extend(moved);
+        changed[target as usize] = true;
+    }
+    for (c, changed) in charts.iter_mut().zip(changed) {
+        if changed {
+            (c.u, c.v) = plane_axes(c.axis, &c.triangles, indices, positions);
+        }
+    }
+    charts.retain(|c| !c.triangles.is_empty());
     charts
 }
 
