@@ -6,10 +6,14 @@
 // PSNR against the server's render of the same camera at 0.25 px (the full-resolution
 // reference), until it is within 1 dB of the PSNR it settles at, and until it settles at 1 px.
 // Figures are printed, never asserted.
-// Usage: scripts/bench-textures-stream [--mesh FILE.gltf] [--spreads 0,10] [--psnr 30]
-//        [--mbps N] [--latency MS] [--view-timeout S]
+// Usage: scripts/bench-textures-stream [--mesh FILE.gltf|FILE.obj|synth:N] [--texture-side 2048]
+//        [--spreads 0,10] [--psnr 30] [--mbps N] [--latency MS] [--view-timeout S]
+// (synth:N: the demo generator's relief of N triangles with its texture, written as OBJ + MTL +
+// JPEG by meshwiki-bench.)
 
-import { readFileSync, readdirSync } from 'node:fs';
+import { execFileSync } from 'node:child_process';
+import { mkdtempSync, readFileSync, readdirSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
 import { basename, dirname, join } from 'node:path';
 
 import { cameraPath, openOnLink, option } from './bench-path.mjs';
@@ -22,13 +26,15 @@ import { storedZip } from '../tests/browser/support/zip.mjs';
 
 const opt = option(process.argv.slice(2));
 const MESH = opt('mesh', join(SHARED_MESHES, 'mask_bali_100k_textured_gltf/mask-gltf-2.0_separated-valid.gltf'));
+/** Texels a side of the generated relief's texture (`--mesh synth:N`). */
+const TEXTURE_SIDE = opt('texture-side', '2048');
 const SPREADS = opt('spreads', '0,10').split(',').map(Number);
 const TARGET = Number(opt('psnr', '30'));
 const MBPS = Number(opt('mbps', '16'));
 const LATENCY_MS = Number(opt('latency', '20'));
 const VIEW_TIMEOUT = Number(opt('view-timeout', '180')) * 1000;
 /** How often the canvas is compared with the reference while a view streams. */
-const SAMPLE_MS = 250;
+const SAMPLE_MS = 1000;
 
 const mb = (b) => (b / 1e6).toFixed(2).padStart(6);
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
@@ -36,7 +42,7 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 /** Uploads the glTF and the files beside it as one .zip, built with `spread`; the model. */
 async function upload(api, gltf, spread) {
   const dir = dirname(gltf);
-  const files = readdirSync(dir).filter((f) => /\.(gltf|glb|bin|jpe?g|png|webp)$/i.test(f));
+  const files = readdirSync(dir).filter((f) => /\.(gltf|glb|bin|obj|mtl|jpe?g|png|webp)$/i.test(f));
   const zip = storedZip(files.map((f) => [`scan/${f}`, readFileSync(join(dir, f))]));
   const q = new URLSearchParams({ title: `${basename(gltf)} ΔQ ${spread}`, filename: 'scan.zip', texture_spread: String(spread) });
   const res = await api.request('POST', `/api/v1/models/upload?${q}`, { body: zip, headers: { 'Content-Type': 'application/zip' }, raw: true });
@@ -92,13 +98,26 @@ async function run(server, model, path) {
   }
 }
 
+/** The scan to upload: `MESH`, or the generated relief written as OBJ + MTL + JPEG by
+ * `meshwiki-bench textures synth:N --write-obj` into `scratch`. */
+function scanPath(scratch) {
+  if (!MESH.startsWith('synth:')) return MESH;
+  const bench = join(process.env.CARGO_TARGET_DIR || 'target', 'debug', 'meshwiki-bench');
+  execFileSync(bench, ['textures', MESH, '--texture-side', TEXTURE_SIDE, '--write-obj', scratch], { stdio: 'inherit' });
+  return join(scratch, 'scan.obj');
+}
+
 async function main() {
+  const scratch = mkdtempSync(join(tmpdir(), 'mw-bench-textures-'));
+  // Written before the server starts: a kept-alive connection left idle while the scan is
+  // written would be closed under the upload.
+  const MESH_PATH = scanPath(scratch);
   const server = await startServer();
   try {
-    console.log(`meshwiki bench textures-stream: ${basename(MESH)}, link ${MBPS} Mbit/s, ${LATENCY_MS} ms latency (Chromium emulation), target ${TARGET} dB against the server's 0.25 px render`);
+    console.log(`meshwiki bench textures-stream: ${MESH.startsWith('synth:') ? `generated relief ${MESH}, ${TEXTURE_SIDE}² texture` : basename(MESH)}, link ${MBPS} Mbit/s, ${LATENCY_MS} ms latency (Chromium emulation), target ${TARGET} dB against the server's 0.25 px render`);
     const results = [];
     for (const spread of SPREADS) {
-      const { model, report } = await upload(server.api, MESH, spread);
+      const { model, report } = await upload(server.api, MESH_PATH, spread);
       const leaves = await leafVertices(join(server.dataDir, model.lod_path));
       const p = regionAt(leaves, [0, 0, 1], [0, 0, 0], 0.01).seed;
       const path = cameraPath(leaves.table.center, leaves.table.radius, p);
@@ -119,6 +138,7 @@ async function main() {
     }
   } finally {
     await server.stop();
+    rmSync(scratch, { recursive: true, force: true });
   }
 }
 

@@ -47,6 +47,11 @@ pub struct Args {
     /// Spreads `ΔQ` to measure.
     #[arg(long, value_delimiter = ',', default_values_t = [10u8, 20, 30])]
     pub spreads: Vec<u8>,
+    /// Instead of measuring: write the generated relief (`synth:N`) with its texture as
+    /// `scan.obj`, `scan.mtl` and `scan.jpg` (JPEG q95) into this folder, a textured scan to
+    /// upload (`scripts/bench-textures-stream --mesh synth:N`).
+    #[arg(long)]
+    pub write_obj: Option<PathBuf>,
 }
 
 struct Measured {
@@ -163,11 +168,77 @@ pub fn run(args: Args) -> Result<()> {
             Source::File(path)
         }
     };
+    if let Some(out) = &args.write_obj {
+        let Source::Relief {
+            triangles, texture, ..
+        } = &scan
+        else {
+            bail!("--write-obj writes the generated relief: give synth:N");
+        };
+        return write_obj(*triangles, texture.clone(), out);
+    }
     let dir = std::env::temp_dir().join(format!("meshwiki-bench-textures-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let result = bench(&args, &scan, &dir);
     let _ = std::fs::remove_dir_all(&dir);
     result
+}
+
+/// Writes the relief of `triangles` with `texture` as an OBJ with its MTL and JPEG in `dir`
+/// (one `vt` per distinct vertex and coordinate; OBJ's `v` counts from the bottom row).
+fn write_obj(triangles: u64, texture: std::sync::Arc<mesh::Texture>, dir: &Path) -> Result<()> {
+    use std::io::Write as _;
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut scan = mesh::TexturedMesh::default();
+    Relief::new(triangles, mesh::synth::DEFAULT_SEED)
+        .stream_with_texture(texture.clone(), &mut scan)?;
+    std::fs::write(dir.join("scan.jpg"), encode_jpeg(&texture, 95))?;
+    std::fs::write(
+        dir.join("scan.mtl"),
+        "newmtl relief\nKd 1 1 1\nmap_Kd scan.jpg\n",
+    )?;
+    let file = std::fs::File::create(dir.join("scan.obj"))?;
+    let mut w = std::io::BufWriter::new(file);
+    writeln!(
+        w,
+        "# generated relief, {triangles} triangles\nmtllib scan.mtl\nusemtl relief"
+    )?;
+    for p in &scan.mesh.positions {
+        writeln!(w, "v {} {} {}", p[0], p[1], p[2])?;
+    }
+    let mut vt: std::collections::HashMap<(u32, [u32; 2]), usize> = Default::default();
+    let mut faces = Vec::with_capacity(scan.faces.len());
+    for (tri, face) in scan.mesh.indices.chunks_exact(3).zip(&scan.faces) {
+        let mut corners = [(0u32, 0usize); 3];
+        for k in 0..3 {
+            let uv = face.uv[k];
+            let next = vt.len() + 1;
+            let id = match vt.entry((tri[k], [uv[0].to_bits(), uv[1].to_bits()])) {
+                std::collections::hash_map::Entry::Occupied(e) => *e.get(),
+                std::collections::hash_map::Entry::Vacant(e) => {
+                    writeln!(w, "vt {} {}", uv[0], 1.0 - uv[1])?;
+                    *e.insert(next)
+                }
+            };
+            corners[k] = (tri[k] + 1, id);
+        }
+        faces.push(corners);
+    }
+    for c in faces {
+        writeln!(
+            w,
+            "f {}/{} {}/{} {}/{}",
+            c[0].0, c[0].1, c[1].0, c[1].1, c[2].0, c[2].1
+        )?;
+    }
+    w.flush()?;
+    println!(
+        "wrote {} (and scan.mtl, scan.jpg): {} triangles, {}² texture",
+        dir.join("scan.obj").display(),
+        scan.faces.len(),
+        texture.width()
+    );
+    Ok(())
 }
 
 /// Without and with the texture, side by side.
