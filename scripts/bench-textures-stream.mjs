@@ -3,8 +3,8 @@
 // server on an emulated link, once per build of the scan with a different fragment-quality
 // spread (the TexMesh paper's ΔQ: 0 is uniform JPEG quality, the default 10 follows feature
 // density). Per view it prints the bytes received until the canvas first reaches a target
-// PSNR against the server's render of the same camera at 0.25 px (the full-resolution
-// reference), until it is within 1 dB of the PSNR it settles at, and until it settles at 1 px.
+// PSNR against the server's render of the same camera (2×2 supersampled at 0.5 px: the
+// full-resolution reference), until it is within 1 dB of the PSNR it settles at, and until it settles at 1 px.
 // Figures are printed, never asserted.
 // Usage: scripts/bench-textures-stream [--mesh FILE.gltf|FILE.obj|synth:N] [--texture-side 2048]
 //        [--spreads 0,10] [--psnr 30] [--mbps N] [--latency MS] [--view-timeout S]
@@ -76,7 +76,10 @@ async function run(server, model, path) {
         if (Date.now() - start > VIEW_TIMEOUT) throw new Error(`view ${cam.name} did not settle`);
         if (s.frames > (i === 0 ? 0 : frames0) && s.drawn > 0) {
           const frame = await capture(page, 'bench');
-          url ??= (await serverRenderUrl(page, model.id, frame)) + '&px=0.25';
+          // The reference: the server's render at twice the size and 0.5 px, which the page
+          // scales down 2:1 (bilinear at the centre of each 2×2 block: their mean), so the
+          // reference is neither coarser nor more aliased than a 1 px frame should be.
+          url ??= (await serverRenderUrl(page, model.id, { width: frame.width * 2, height: frame.height * 2 })) + '&px=0.5';
           last = await compareWithImage(page, 'bench', url);
           samples.push({ bytes: s.bytes - before, psnr: last.psnr });
           if (reached === null && last.psnr >= TARGET) reached = { ms: Date.now() - start, bytes: s.bytes - before };
@@ -114,7 +117,7 @@ async function main() {
   const MESH_PATH = scanPath(scratch);
   const server = await startServer();
   try {
-    console.log(`meshwiki bench textures-stream: ${MESH.startsWith('synth:') ? `generated relief ${MESH}, ${TEXTURE_SIDE}² texture` : basename(MESH)}, link ${MBPS} Mbit/s, ${LATENCY_MS} ms latency (Chromium emulation), target ${TARGET} dB against the server's 0.25 px render`);
+    console.log(`meshwiki bench textures-stream: ${MESH.startsWith('synth:') ? `generated relief ${MESH}, ${TEXTURE_SIDE}² texture` : basename(MESH)}, link ${MBPS} Mbit/s, ${LATENCY_MS} ms latency (Chromium emulation), target ${TARGET} dB against the server's render (2×2 supersampled, 0.5 px)`);
     const results = [];
     for (const spread of SPREADS) {
       const { model, report } = await upload(server.api, MESH_PATH, spread);
