@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use meshwiki_engine::lod::segsimplify::Simplifier;
 use serde::Deserialize;
-use utoipa::{IntoParams, ToSchema};
+use utoipa::ToSchema;
 
 use super::{App, AppError};
 use crate::jobs::archive::{self, ReceivedFile};
@@ -19,8 +19,7 @@ use crate::uploads::TempUpload;
 
 /// Build options the uploader of a scan may choose; the server keeps its memory budget and
 /// threads. Every field is optional: the server's default where absent.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize, ToSchema, IntoParams)]
-#[into_params(parameter_in = Query)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize, ToSchema)]
 pub struct BuildChoices {
     /// How the levels are simplified: `quadric` (edge collapses, the default) or `segments`
     /// (the mesh-segmentation paper's segment-driven vertex removal).
