@@ -8,9 +8,9 @@
 //!
 //! 1. **Charts**: region growing over the patch's triangle adjacency from the largest
 //!    unassigned triangle; a neighbour joins while its normal stays within 60° of the chart's
-//!    area-weighted mean normal (70° for triangles no larger than a texel or so). A chart is projected orthogonally onto the plane of that
-//!    normal (every triangle keeps its orientation, so nothing folds) and turned to its
-//!    principal axes for a tight rectangle. A chart of fewer than [`SMALL_CHART_TEXELS`]
+//!    area-weighted mean normal (70° for triangles no larger than a texel or so). A chart is
+//!    projected orthogonally onto the plane of that normal (every triangle keeps its
+//!    orientation, so nothing folds) and turned to its principal axes for a tight rectangle. A chart of fewer than [`SMALL_CHART_TEXELS`]
 //!    texels then joins the neighbouring chart it shares most edges with, where it can be
 //!    projected along that chart's axis (within 75°).
 //! 2. **Packing**: rectangles with a gutter of [`GUTTER`] texels on every side, tallest first
@@ -80,8 +80,7 @@ pub trait ColorSource {
 
     /// Mean linear RGBA over the points `points` of triangle `tri`, all within a texel of
     /// `centre` (a texel's supersamples): by default, one [`ColorSource::sample`] each.
-    fn sample_box(&self, tri: usize, centre: [f32; 3], points: &[[f32; 3]]) -> [f32; 4] {
-        let _ = centre;
+    fn sample_box(&self, tri: usize, _centre: [f32; 3], points: &[[f32; 3]]) -> [f32; 4] {
         mean(points.iter().map(|&b| self.sample(tri, b)))
     }
 }

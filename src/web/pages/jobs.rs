@@ -121,7 +121,7 @@ impl BuildFields {
         .any(|v| !v.trim().is_empty())
     }
 
-    /// The build options of the form: empty fields are the server's defaults.
+    /// The build options of the form, parsed: empty fields are the server's defaults.
     fn choices(&self) -> Result<BuildChoices, ApiError> {
         fn number<T: std::str::FromStr>(name: &str, v: &str) -> Result<Option<T>, ApiError> {
             let v = v.trim();
@@ -134,22 +134,15 @@ impl BuildFields {
         }
         let simplifier = match self.simplifier.trim() {
             "" => None,
-            "quadric" => Some(Simplifier::Quadric),
-            "segments" => Some(Simplifier::Segments),
-            other => {
-                return Err(ApiError::bad(format!(
-                    "simplifier must be quadric or segments, not {other:?}"
-                )));
-            }
+            name => Some(name.parse::<Simplifier>().map_err(ApiError::bad)?),
         };
-        let choices = BuildChoices {
+        // Ranges are checked where every route's are (`App::submit_scan`).
+        Ok(BuildChoices {
             simplifier,
             patch_triangles: number("patch_triangles", &self.patch_triangles)?,
             texture_quality: number("texture_quality", &self.texture_quality)?,
             texture_spread: number("texture_spread", &self.texture_spread)?,
-        };
-        choices.job_options()?;
-        Ok(choices)
+        })
     }
 }
 
