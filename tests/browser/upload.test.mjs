@@ -246,6 +246,8 @@ test('the jobs page reloads when a build ends, but not over a form being filled 
   assert.ok(['queued', 'running'].includes(await statusOf(page, job)), 'the build is still under way when the page opens');
   await page.evaluate(() => { window.__kept = true; });
   await poll(page, () => window.__kept === undefined, Boolean, 120_000);
-  assert.equal(await statusOf(page, job), 'done');
+  // The reloaded document may still be loading: its row is waited for, and must say done.
+  const reloaded = await poll(page, (jid) => document.getElementById(`job-${jid}`)?.getAttribute('data-job-status') ?? null, (s) => s !== null, 30_000, job);
+  assert.equal(reloaded, 'done');
   await closePage(page);
 });
