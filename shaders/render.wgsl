@@ -19,10 +19,13 @@
 // `ALBEDO` (a pipeline constant) is where a patch's colour comes from: 0 the frame's base
 // colour (models without colour), 1 its vertex colours, 2 its texture atlas. Each patch is drawn
 // by the pipeline of its own, so no shader carries the others' varyings, loads or branches.
+// `NORMAL_MAP` (a pipeline constant): the patch has a normal map (coarse patches, issue 11
+// item 4), whose object-space normal of the finest surface replaces the interpolated one.
 
 enable primitive_index;
 
 override ALBEDO: u32 = 1u;
+override NORMAL_MAP: bool = false;
 
 struct Frame {
     view_proj: mat4x4<f32>,
@@ -63,6 +66,8 @@ struct Draw {
 // the patch's texture atlas (a white texel when it has none), sampled bilinearly
 @group(1) @binding(1) var atlas: texture_2d<f32>;
 @group(1) @binding(2) var atlas_sampler: sampler;
+// the patch's normal map (a white texel when it has none): RGB = (n + 1) / 2, no sRGB curve
+@group(1) @binding(3) var normal_map: texture_2d<f32>;
 
 struct VIn {
     @location(0) position: vec3<f32>,
@@ -93,7 +98,7 @@ fn vs_main(v: VIn, @builtin(instance_index) ii: u32) -> VOut {
     } else {
         out.color = vec3<f32>(0.0);
     }
-    if (ALBEDO == 2u) {
+    if (ALBEDO == 2u || NORMAL_MAP) {
         out.uv = v.uv;
     } else {
         out.uv = vec2<f32>(0.0);
@@ -158,13 +163,18 @@ fn to_eye(frag: vec4<f32>) -> vec3<f32> {
 }
 
 // Unit normal facing the viewer.
+// With a normal map, the texel's mean normal as it is: shorter than 1 where the finest surface
+// under the texel is rough, which makes the (linear) diffuse light the texel's mean light.
 fn facing_normal(in: VOut, front: bool) -> vec3<f32> {
     var n = in.normal;
+    if (NORMAL_MAP) {
+        n = textureSampleLevel(normal_map, atlas_sampler, in.uv, 0.0).rgb * 2.0 - 1.0;
+    }
     let l = length(n);
-    if (l > 1e-20) {
-        n = n / l;
-    } else {
+    if (l <= 1e-20) {
         n = to_eye(in.clip);
+    } else if (!NORMAL_MAP) {
+        n = n / l;
     }
     if (!front) {
         n = -n;

@@ -24,6 +24,8 @@
       var input = form.querySelector("[name=" + name + "]");
       if (input && input.value.trim() !== "") build[name] = Number(input.value);
     });
+    var normalMaps = form.querySelector("[name=normal_maps]");
+    if (normalMaps && normalMaps.checked) build.normal_maps = true;
     return build;
   }
 

@@ -7,6 +7,7 @@ mod build;
 mod build_bytes;
 mod maxflow;
 mod nexus;
+mod normals;
 mod render;
 mod search;
 mod select;
@@ -56,6 +57,9 @@ enum Command {
     /// Textured scans: fragment JPEG quality by feature density against uniform quality at
     /// equal bytes (texel PSNR of featured and plain fragments).
     Textures(textures::Args),
+    /// Normal maps for coarse patches and silhouette-first refinement: bytes to a given
+    /// image quality along a camera path, with and without.
+    Normals(normals::Args),
 }
 
 /// The data directory.
@@ -115,5 +119,6 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Select(args) => tokio::task::spawn_blocking(move || select::run(args)).await?,
         Command::Simplify(args) => tokio::task::spawn_blocking(move || simplify::run(args)).await?,
         Command::Textures(args) => tokio::task::spawn_blocking(move || textures::run(args)).await?,
+        Command::Normals(args) => tokio::task::spawn_blocking(move || normals::run(args)).await?,
     }
 }

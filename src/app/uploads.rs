@@ -36,6 +36,10 @@ pub struct BuildChoices {
     /// every atlas the same quality; default 10).
     #[serde(default)]
     pub texture_spread: Option<u8>,
+    /// Bake a normal map into every coarse patch (default off: on the scans measured they
+    /// cost more bytes than the finer geometry for the same image; `meshwiki-bench normals`).
+    #[serde(default)]
+    pub normal_maps: Option<bool>,
 }
 
 /// Smallest patch triangle budget an upload may ask for.
@@ -74,6 +78,7 @@ impl BuildChoices {
             max_patch_triangles: self.patch_triangles,
             texture_quality: self.texture_quality,
             texture_spread: self.texture_spread,
+            normal_maps: self.normal_maps,
             ..JobOptions::default()
         })
     }

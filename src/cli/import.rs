@@ -53,6 +53,10 @@ pub struct Args {
     /// `meshwiki-bench textures` compares them at equal bytes).
     #[arg(long, value_parser = clap::value_parser!(u8).range(0..=100))]
     pub texture_spread: Option<u8>,
+    /// Bake a normal map into every coarse patch (`meshwiki-bench normals` measures what
+    /// they cost and bring).
+    #[arg(long)]
+    pub normal_maps: bool,
     /// Account that owns the model (default: the first admin).
     #[arg(long)]
     pub owner: Option<String>,
@@ -120,6 +124,7 @@ async fn import(db: &Db, settings: Settings, args: &Args, bytes: u64) -> anyhow:
             simplifier: args.simplifier,
             texture_quality: args.texture_quality,
             texture_spread: args.texture_spread,
+            normal_maps: args.normal_maps.then_some(true),
             ..JobOptions::default()
         },
         running_pid: Some(std::process::id() as i64),

@@ -58,6 +58,9 @@ pub struct BuildArgs {
     pub input: PathBuf,
     /// The LOD file to write.
     pub output: PathBuf,
+    /// Bake a normal map into every coarse patch.
+    #[arg(long)]
+    pub normal_maps: bool,
 }
 
 /// Arguments of `lod dump`.
@@ -80,7 +83,10 @@ pub fn run(command: LodCommand) -> anyhow::Result<()> {
             let report = lod::build_file(
                 &args.input,
                 &args.output,
-                &BuildOptions::default(),
+                &BuildOptions {
+                    normal_maps: args.normal_maps,
+                    ..BuildOptions::default()
+                },
                 &NoProgress,
             )
             .with_context(|| format!("cannot build {}", args.input.display()))?;
@@ -161,6 +167,8 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
             "uvs": patch.uvs,
             "image_length": patch.image.as_ref().map(|i| i.len()),
             "image_crc32": patch.image.as_ref().map(|i| crc32fast::hash(i)),
+            "normal_map_length": patch.normal_map.as_ref().map(|i| i.len()),
+            "normal_map_crc32": patch.normal_map.as_ref().map(|i| crc32fast::hash(i)),
         }));
     }
     let grid = file.grid();
@@ -171,6 +179,7 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
         "has_colors": file.has_colors(),
         "has_normals": file.has_normals(),
         "has_texture": file.has_texture(),
+        "has_normal_maps": file.has_normal_maps(),
         "patches": patches,
     });
     let text = serde_json::to_string(&out)?;

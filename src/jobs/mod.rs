@@ -719,6 +719,7 @@ impl Jobs {
                 .options
                 .texture_spread
                 .map_or(d.texture_spread, |s| s.min(100)),
+            normal_maps: job.options.normal_maps.unwrap_or(d.normal_maps),
             ..d
         }
     }

@@ -108,6 +108,10 @@ pub struct JobOptions {
     /// paper's ΔQ; 0: uniform quality; default 10).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub texture_spread: Option<u8>,
+    /// Bake normal maps into the coarse patches (issue 11; default off, see
+    /// `meshwiki-bench normals`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub normal_maps: Option<bool>,
     /// Triangles of the generated relief (demo jobs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub triangles: Option<u64>,

@@ -112,6 +112,8 @@ struct UploadQuery {
     texture_quality: Option<u8>,
     /// How far an atlas' quality moves with its patch's feature density (0–50; default 10).
     texture_spread: Option<u8>,
+    /// Bake a normal map into every coarse patch (default false).
+    normal_maps: Option<bool>,
 }
 
 impl UploadQuery {
@@ -121,6 +123,7 @@ impl UploadQuery {
             patch_triangles: self.patch_triangles,
             texture_quality: self.texture_quality,
             texture_spread: self.texture_spread,
+            normal_maps: self.normal_maps,
         }
     }
 }

@@ -159,6 +159,8 @@ pub struct HierarchyJson {
     pub has_normals: bool,
     /// Every patch carries a texture atlas (`docs/FORMAT.md`, patch blob).
     pub has_texture: bool,
+    /// Every coarse patch carries a normal map (`docs/FORMAT.md`, "Normal maps").
+    pub has_normal_maps: bool,
     /// Size of the whole file in bytes.
     pub file_bytes: u64,
     /// Nodes, by id.
@@ -229,6 +231,7 @@ pub fn hierarchy_json(lod: &LodFile) -> Result<Vec<u8>, serde_json::Error> {
         has_colors: lod.has_colors(),
         has_normals: lod.has_normals(),
         has_texture: lod.has_texture(),
+        has_normal_maps: lod.has_normal_maps(),
         file_bytes: lod.bytes().len() as u64,
         nodes,
         groups,

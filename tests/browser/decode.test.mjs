@@ -46,6 +46,17 @@ function checkFile(lodPath, dumpPath, deps) {
     if (dump.has_normals) assert.deepEqual(Array.from(p.normals), ref.normals.flat().map(Math.fround), `normals of node ${i}`);
     // Textures (`lod dump` gives `uvs` per vertex and the image's length and CRC-32; binaries
     // from before textures give neither, and build untextured models only).
+    // Normal maps (coarse patches of a build with them; `lod dump` gives their length and
+    // CRC-32, and texture coordinates for them on untextured scans too).
+    if (ref.normal_map_length != null) {
+      assert.ok(p.normalMap, `normal map of node ${i}`);
+      assert.equal(p.normalMap.length, ref.normal_map_length, `normal map length of node ${i}`);
+      assert.equal(crc32(p.normalMap), ref.normal_map_crc32, `normal map of node ${i}`);
+      assert.ok(jpegSize(p.normalMap), `node ${i}'s normal map is a JPEG with a size`);
+      assert.deepEqual(Array.from(p.uvs), ref.uvs.flat().map(Math.fround), `texture coordinates of node ${i}`);
+    } else {
+      assert.equal(p.normalMap, null, `normal map of node ${i}`);
+    }
     if (dump.has_texture) {
       assert.ok(p.image, `image of node ${i}`);
       assert.equal(p.image.length, ref.image_length, `image length of node ${i}`);
@@ -62,11 +73,12 @@ function checkFile(lodPath, dumpPath, deps) {
       }
     } else {
       assert.equal(p.image, null, `image of node ${i}`);
-      assert.equal(p.uvs, null, `texture coordinates of node ${i}`);
+      if (ref.normal_map_length == null) assert.equal(p.uvs, null, `texture coordinates of node ${i}`);
     }
     vertices += n;
   }
   assert.equal(table.hasTexture, !!dump.has_texture);
+  assert.equal(table.hasNormalMaps, !!dump.has_normal_maps);
   return { nodes: table.nodeCount, vertices };
 }
 
@@ -86,6 +98,23 @@ test('decodes every patch of real LOD files exactly as the engine does', async (
     const { nodes, vertices } = checkFile(lod, dump, deps);
     t.diagnostic(`${mesh.name}: ${nodes} patches, ${vertices} vertices decoded identically`);
   }
+});
+
+test('decodes normal maps exactly as the engine does', async (t) => {
+  const deps = await decoderDeps();
+  const tmp = mkdtempSync(join(tmpdir(), 'mw-decode-nm-'));
+  t.after(() => rmSync(tmp, { recursive: true, force: true }));
+  const mesh = sampleMesh(tmp, ['gargoyle_50k_vcolor.ply', 'laurana_bust_50k_vcolor.ply']);
+  const lod = join(tmp, 'mapped.mwlod');
+  const dump = join(tmp, 'mapped.json');
+  meshwiki(['lod', 'build', '--normal-maps', mesh.path, lod]);
+  meshwiki(['lod', 'dump', lod, '--out', dump]);
+  const { nodes, vertices } = checkFile(lod, dump, deps);
+  const { table } = readLod(lod);
+  assert.ok(table.hasNormalMaps && !table.hasTexture);
+  const mapped = JSON.parse(readFileSync(dump, 'utf8')).patches.filter((p) => p.normal_map_length != null).length;
+  assert.equal(mapped, Array.from(table.level).filter((l) => l > 0).length, 'every coarse patch has a normal map');
+  t.diagnostic(`${mesh.name}: ${nodes} patches (${mapped} with normal maps), ${vertices} vertices decoded identically`);
 });
 
 /** The textured scan of ../shared/data (glTF with a JPEG texture). */
@@ -211,7 +240,7 @@ const SQUARE = {
  * residuals. `texture`: with the image section and the coordinate stream; `compression`: the
  * header byte (the payload is stored uncompressed either way; tests decompress it themselves).
  */
-function encodeSquare(encoder, decoder, { texture, image = fakeJpeg(64, 48), compression = 0 }) {
+function encodeSquare(encoder, decoder, { texture, image = fakeJpeg(64, 48), normalMap = null, compression = 0 }) {
   const n = SQUARE.grid.length;
   const t = SQUARE.indices.length / 3;
   const idxS = encoder.encodeIndexBuffer(new Uint8Array(Uint32Array.from(SQUARE.indices).buffer), t * 3, 4);
@@ -237,9 +266,11 @@ function encodeSquare(encoder, decoder, { texture, image = fakeJpeg(64, 48), com
   const header = [...u32le(n), ...u32le(t), ...u32le(flags), ...u32le(0), ...SQUARE.min.flatMap(u32le), ...streams.flatMap((s) => u32le(s.length))];
   assert.equal(header.length, 52);
   const payload = Uint8Array.from([...header, ...streams.flatMap((s) => Array.from(s))]);
-  const head = [0x4d, 0x57, 0x50, 0x32, compression, texture ? 1 : 0, 0, 0, ...u32le(payload.length)];
-  const section = texture ? [...u32le(image.length), ...image] : [];
-  return { blob: Uint8Array.from([...head, ...section, ...payload]), payload, image };
+  const blobFlags = (texture && image ? 1 : 0) | (normalMap ? 2 : 0);
+  const head = [0x4d, 0x57, 0x50, 0x32, compression, blobFlags, 0, 0, ...u32le(payload.length)];
+  const section = texture && image ? [...u32le(image.length), ...image] : [];
+  const nmSection = normalMap ? [...u32le(normalMap.length), ...normalMap] : [];
+  return { blob: Uint8Array.from([...head, ...section, ...nmSection, ...payload]), payload, image };
 }
 
 async function encoderDeps() {
@@ -250,7 +281,7 @@ async function encoderDeps() {
 
 /** Everything of a decoded patch but its texture. */
 function geometry(p) {
-  const { uvs: _uvs, image: _image, ...rest } = p;
+  const { uvs: _uvs, image: _image, normalMap: _normalMap, ...rest } = p;
   return Object.fromEntries(Object.entries(rest).map(([k, v]) => [k, ArrayBuffer.isView(v) ? Array.from(v) : v]));
 }
 
@@ -303,6 +334,25 @@ test('textured blobs: image section, texture coordinates and wedge vertices (han
   // An image section without texture coordinates decodes; the viewer then draws vertex colours.
   const empty = decodePatch(encodeSquare(encoder, deps.meshopt, { texture: true, image: new Uint8Array(0) }).blob, grid, deps);
   assert.equal(empty.image.length, 0);
+
+  // A normal-map section after the image section, or alone (an untextured scan's coarse
+  // patch): the same geometry and coordinates.
+  const normalMap = fakeJpeg(32, 16);
+  const both = decodePatch(encodeSquare(encoder, deps.meshopt, { texture: true, normalMap }).blob, grid, deps);
+  assert.deepEqual(Array.from(both.image), Array.from(image));
+  assert.deepEqual(Array.from(both.normalMap), Array.from(normalMap));
+  assert.equal(both.normalMap.buffer.byteLength, normalMap.length);
+  assert.deepEqual(jpegSize(both.normalMap), { width: 32, height: 16 });
+  assert.deepEqual(Array.from(both.uvs), Array.from(p.uvs));
+  const alone = decodePatch(encodeSquare(encoder, deps.meshopt, { texture: true, image: null, normalMap }).blob, grid, deps);
+  assert.equal(alone.image, null);
+  assert.deepEqual(Array.from(alone.normalMap), Array.from(normalMap));
+  assert.deepEqual(geometry(alone), geometry(both));
+  assert.equal(p.normalMap, null);
+  // A normal map declared longer than the blob.
+  const bad = encodeSquare(encoder, deps.meshopt, { texture: true, image: null, normalMap }).blob;
+  bad.set(u32le(bad.length), 12);
+  assert.throws(() => decodePatch(bad, grid, deps), DecodeError);
 });
 
 test('textured blobs that do not decode are errors (hand-built)', async () => {

@@ -243,10 +243,10 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
     assert!(e.contains("patch_triangles"), "{e}");
     let r = admin.post(
         &format!("/api/v1/uploads/{id}/finish"),
-        &json!({"title": "Zip session", "build": {"patch_triangles": 256, "simplifier": "quadric"}}),
+        &json!({"title": "Zip session", "build": {"patch_triangles": 256, "simplifier": "quadric", "normal_maps": true}}),
     );
     assert_eq!(r.status, 202, "{}", r.text());
-    models.push((r.json(), Some(256)));
+    models.push((r.json(), Some(256), true));
 
     // The raw API: options are query parameters, refused before the body is read.
     let e = admin
@@ -267,7 +267,7 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
         true,
     );
     assert_eq!(r.status, 202, "{}", r.text());
-    models.push((r.json(), Some(300)));
+    models.push((r.json(), Some(300), false));
 
     // The page's form.
     let page = admin.get("/admin/jobs").text();
@@ -297,12 +297,13 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
             ("csrf_token", &csrf),
             ("title", "Zip form"),
             ("simplifier", "segments"),
+            ("normal_maps", "on"),
         ],
         &[("relief.zip", "application/zip", &archive)],
     );
     assert_eq!(r.status, 303, "{}", r.text());
 
-    for (j, patch) in &models {
+    for (j, patch, normal_maps) in &models {
         assert_eq!(j["model"]["source_name"], "scan.obj", "{j}");
         let job = wait_finished(&admin, j["job"]["id"].as_i64().unwrap(), 120);
         assert_eq!(job["status"], "done", "{job}");
@@ -310,6 +311,11 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
         assert_eq!(job["options"]["max_patch_triangles"], json!(patch), "{job}");
         let nodes = job["report"]["nodes"].as_u64().unwrap_or(0);
         assert!(nodes > 2, "{nodes} nodes: {job}");
+        // Normal maps where asked for (off by default).
+        let lod = admin
+            .get(&format!("/api/v1/models/{}/lod", j["model"]["id"]))
+            .json();
+        assert_eq!(lod["has_normal_maps"], json!(normal_maps), "{j}");
     }
     let list = admin.get("/api/v1/models").json();
     let titles: Vec<&str> = list
@@ -343,6 +349,9 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
     let job = wait_finished(&admin, job, 120);
     assert_eq!(job["status"], "done");
     assert_eq!(job["options"]["simplifier"], "segments", "{job}");
+    assert_eq!(job["options"]["normal_maps"], true, "{job}");
+    let lod = admin.get(&format!("/api/v1/models/{form_model}/lod")).json();
+    assert_eq!(lod["has_normal_maps"], true);
     nothing_left(dir.path());
 }
 

@@ -55,10 +55,17 @@ const SMALL_COS: f32 = 0.342;
 /// Longest edge, in texels, of a triangle that joins charts by [`SMALL_COS`].
 const SMALL_EDGE: f32 = 1.5;
 
-/// A patch's atlas: the image and every triangle corner's coordinates in it.
+/// A patch's atlas: its images, which share one layout, and every triangle corner's
+/// coordinates in it.
 pub struct PatchTexture {
-    /// sRGB RGBA8.
-    pub image: Texture,
+    /// Colour, sRGB RGBA8 (textured scans; `None` where the atlas holds a normal map alone).
+    pub image: Option<Texture>,
+    /// The normal map (coarse patches, issue 11 item 4): the mean object-space normal of the
+    /// finest surface over each texel, `(n + 1) / 2 × 255` in RGB, bytes without sRGB curve.
+    /// The mean is not normalised: its length falls where the surface under the texel is
+    /// rough, and diffuse light, linear in the normal, is then exactly the texel's mean light
+    /// (a normalised mean shades rough surfaces as if they were smooth: too bright).
+    pub normals: Option<Texture>,
     /// Per corner (three per triangle of the patch), in [0, 1], `v = 0` at the top row.
     pub uvs: Vec<[f32; 2]>,
     /// World units per texel.
@@ -66,34 +73,84 @@ pub struct PatchTexture {
 }
 
 impl PatchTexture {
-    /// Linear RGBA at barycentric `bary` of triangle `tri`.
+    fn uv(&self, tri: usize, bary: [f32; 3]) -> [f32; 2] {
+        interpolate2(&self.uvs[tri * 3..tri * 3 + 3], bary)
+    }
+
+    /// Linear RGBA at barycentric `bary` of triangle `tri` (white without colour).
     pub fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4] {
-        let uv = interpolate2(&self.uvs[tri * 3..tri * 3 + 3], bary);
-        self.image.sample(uv[0], uv[1], Wrap::Clamp, Wrap::Clamp)
+        let uv = self.uv(tri, bary);
+        self.image.as_ref().map_or([1.0; 4], |i| {
+            i.sample(uv[0], uv[1], Wrap::Clamp, Wrap::Clamp)
+        })
+    }
+
+    /// The normal map's (mean) normal at barycentric `bary` of triangle `tri`, if it has one.
+    pub fn normal(&self, tri: usize, bary: [f32; 3]) -> Option<Vec3> {
+        let uv = self.uv(tri, bary);
+        let t = self
+            .normals
+            .as_ref()?
+            .sample_unorm(uv[0], uv[1], Wrap::Clamp, Wrap::Clamp);
+        Some(decode_normal(t))
     }
 }
 
-/// Where a baked texel's colour comes from.
-pub trait ColorSource {
-    /// Linear RGBA of the surface at barycentric `bary` of triangle `tri` of the patch baked.
-    fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4];
+/// A surface sample: linear RGBA in 0..4, then a normal in 4..7 (any length: a mean of unit
+/// normals; zero where the source has none).
+pub type Sample = [f32; 7];
 
-    /// Mean linear RGBA over the points `points` of triangle `tri`, all within a texel of
-    /// `centre` (a texel's supersamples): by default, one [`ColorSource::sample`] each.
-    fn sample_box(&self, tri: usize, _centre: [f32; 3], points: &[[f32; 3]]) -> [f32; 4] {
+/// A sample of colour `c` without normal.
+pub fn color_sample(c: [f32; 4]) -> Sample {
+    [c[0], c[1], c[2], c[3], 0.0, 0.0, 0.0]
+}
+
+/// A normal map texel's (mean) normal: bytes `(n + 1) / 2 × 255` read as `byte / 255`.
+pub fn decode_normal(t: [f32; 4]) -> Vec3 {
+    Vec3::new(t[0], t[1], t[2]).mul_add(Vec3::splat(2.0), Vec3::splat(-1.0))
+}
+
+/// A mean normal as normal map bytes (at most unit length; `+z` for a zero normal, where no
+/// surface was found).
+pub fn encode_normal(n: [f32; 3]) -> [u8; 4] {
+    let v = Vec3::from(n);
+    let v = if !v.is_finite() || v.length_squared() < 1e-12 {
+        Vec3::Z
+    } else {
+        v.clamp_length_max(1.0)
+    };
+    let b = |c: f32| ((c * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+    [b(v.x), b(v.y), b(v.z), 255]
+}
+
+/// Where a baked texel's colour and normal come from.
+pub trait SurfaceSource {
+    /// The surface at barycentric `bary` of triangle `tri` of the patch baked.
+    fn sample(&self, tri: usize, bary: [f32; 3]) -> Sample;
+
+    /// Mean over the points `points` of triangle `tri`, all within a texel of `centre` (a
+    /// texel's supersamples): by default, one [`SurfaceSource::sample`] each.
+    fn sample_box(&self, tri: usize, _centre: [f32; 3], points: &[[f32; 3]]) -> Sample {
         mean(points.iter().map(|&b| self.sample(tri, b)))
     }
 }
 
-fn mean(samples: impl Iterator<Item = [f32; 4]>) -> [f32; 4] {
-    let (mut acc, mut n) = ([0f32; 4], 0usize);
+fn mean<const N: usize>(samples: impl Iterator<Item = [f32; N]>) -> [f32; N] {
+    let (mut acc, mut n) = ([0f32; N], 0usize);
     for s in samples {
-        for k in 0..4 {
+        for k in 0..N {
             acc[k] += s[k];
         }
         n += 1;
     }
     acc.map(|a| a / n.max(1) as f32)
+}
+
+/// Which images [`bake`] makes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Maps {
+    pub color: bool,
+    pub normals: bool,
 }
 
 /// Charts packed into an atlas: its size and every corner's position in texels.
@@ -427,11 +484,16 @@ fn pack(positions: &[[f32; 3]], indices: &[u32], charts: &[Chart], texel_size: f
     }
 }
 
-/// Bakes `source` into the atlas `layout` of triangles `tri_count` (corner order as in the
+/// Bakes `source` into the images `maps` of the atlas `layout` (corner order as in the
 /// layout). `supersample`: average 2×2 samples per texel.
-pub fn bake(layout: &Layout, source: &dyn ColorSource, supersample: bool) -> PatchTexture {
+pub fn bake(
+    layout: &Layout,
+    source: &dyn SurfaceSource,
+    supersample: bool,
+    maps: Maps,
+) -> PatchTexture {
     let (w, h) = (layout.width as usize, layout.height as usize);
-    let mut texels = vec![[0f32; 4]; w * h];
+    let mut texels = vec![[0f32; 7]; w * h];
     let mut filled = vec![false; w * h];
     let offsets: &[Vec2; 4] = &[
         Vec2::new(-0.25, -0.25),
@@ -486,15 +548,24 @@ pub fn bake(layout: &Layout, source: &dyn ColorSource, supersample: bool) -> Pat
         }
     }
     dilate(&mut texels, &mut filled, w, h, GUTTER as usize);
-    let image = Texture::from_texels(
-        layout.width,
-        layout.height,
-        texels.into_iter().map(encode_rgba).collect(),
-    )
-    .unwrap_or_else(|| Texture::from_texels(1, 1, vec![[255; 4]]).expect("a 1x1 image is valid"));
+    let image = |texel: fn(&Sample) -> [u8; 4]| {
+        Texture::from_texels(
+            layout.width,
+            layout.height,
+            texels.iter().map(texel).collect(),
+        )
+        .unwrap_or_else(|| {
+            Texture::from_texels(1, 1, vec![[255; 4]]).expect("a 1x1 image is valid")
+        })
+    };
     let (fw, fh) = (layout.width as f32, layout.height as f32);
     PatchTexture {
-        image,
+        image: maps
+            .color
+            .then(|| image(|t| encode_rgba([t[0], t[1], t[2], t[3]]))),
+        normals: maps
+            .normals
+            .then(|| image(|t| encode_normal([t[4], t[5], t[6]]))),
         uvs: layout
             .corners
             .iter()
@@ -506,7 +577,13 @@ pub fn bake(layout: &Layout, source: &dyn ColorSource, supersample: bool) -> Pat
 
 /// `passes` rounds of filling empty texels with the mean of their filled 8-neighbours, then
 /// [`push_pull`] everywhere still empty.
-fn dilate(texels: &mut [[f32; 4]], filled: &mut [bool], w: usize, h: usize, passes: usize) {
+fn dilate<const N: usize>(
+    texels: &mut [[f32; N]],
+    filled: &mut [bool],
+    w: usize,
+    h: usize,
+    passes: usize,
+) {
     for _ in 0..passes {
         let before = filled.to_vec();
         let mut changed = false;
@@ -515,7 +592,7 @@ fn dilate(texels: &mut [[f32; 4]], filled: &mut [bool], w: usize, h: usize, pass
                 if before[y * w + x] {
                     continue;
                 }
-                let mut acc = [0f32; 4];
+                let mut acc = [0f32; N];
                 let mut n = 0;
                 for dy in -1i64..=1 {
                     for dx in -1i64..=1 {
@@ -525,7 +602,7 @@ fn dilate(texels: &mut [[f32; 4]], filled: &mut [bool], w: usize, h: usize, pass
                         }
                         let i = ny as usize * w + nx as usize;
                         if before[i] {
-                            for k in 0..4 {
+                            for k in 0..N {
                                 acc[k] += texels[i][k];
                             }
                             n += 1;
@@ -552,28 +629,28 @@ fn dilate(texels: &mut [[f32; 4]], filled: &mut [bool], w: usize, h: usize, pass
 /// charts' colours. A flat fill met every chart's gutter in a step that each 8×8 JPEG block
 /// along a chart paid for: push-pull makes the atlases 13% smaller on the Bali mask and 9% on
 /// the generated relief, with the same close-ups.
-fn push_pull(texels: &mut [[f32; 4]], filled: &[bool], w: usize, h: usize) {
+fn push_pull<const N: usize>(texels: &mut [[f32; N]], filled: &[bool], w: usize, h: usize) {
     if filled.iter().all(|&f| f) {
         return;
     }
     if !filled.iter().any(|&f| f) {
-        texels.fill([1.0; 4]);
+        texels.fill([1.0; N]);
         return;
     }
     // Push: per level, colour premultiplied by a weight capped at 1.
-    struct Level {
+    struct Level<const N: usize> {
         w: usize,
         h: usize,
-        colour: Vec<[f32; 4]>,
+        colour: Vec<[f32; N]>,
         weight: Vec<f32>,
     }
-    let mut levels = vec![Level {
+    let mut levels = vec![Level::<N> {
         w,
         h,
         colour: texels
             .iter()
             .zip(filled)
-            .map(|(t, &f)| if f { *t } else { [0.0; 4] })
+            .map(|(t, &f)| if f { *t } else { [0.0; N] })
             .collect(),
         weight: filled.iter().map(|&f| f32::from(u8::from(f))).collect(),
     }];
@@ -583,7 +660,7 @@ fn push_pull(texels: &mut [[f32; 4]], filled: &[bool], w: usize, h: usize) {
             break;
         }
         let (nw, nh) = (below.w.div_ceil(2), below.h.div_ceil(2));
-        let mut colour = vec![[0f32; 4]; nw * nh];
+        let mut colour = vec![[0f32; N]; nw * nh];
         let mut weight = vec![0f32; nw * nh];
         for y in 0..below.h {
             for x in 0..below.w {
@@ -681,12 +758,12 @@ pub struct SourceColors<'a> {
     pub textures: &'a [SourceTexture],
 }
 
-impl ColorSource for SourceColors<'_> {
-    fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4] {
+impl SurfaceSource for SourceColors<'_> {
+    fn sample(&self, tri: usize, bary: [f32; 3]) -> Sample {
         if let Some(face) = self.faces.get(tri)
             && let Some(tex) = self.textures.get(face.texture as usize)
         {
-            return tex.sample(interpolate2(&face.uv, bary));
+            return color_sample(tex.sample(interpolate2(&face.uv, bary)));
         }
         let mut acc = [0f32; 4];
         for (k, &weight) in bary.iter().enumerate() {
@@ -706,7 +783,36 @@ impl ColorSource for SourceColors<'_> {
                 acc[i] += l[i] * weight;
             }
         }
-        acc
+        color_sample(acc)
+    }
+}
+
+/// One of the finer patches a coarse patch is resampled from.
+pub struct FinerPatch<'a> {
+    pub positions: &'a [[f32; 3]],
+    pub indices: &'a [u32],
+    /// Its vertex normals: the normal where it has no normal map (leaves).
+    pub normals: &'a [[f32; 3]],
+    pub atlas: Option<&'a PatchTexture>,
+}
+
+impl FinerPatch<'_> {
+    /// Colour (white without atlas colour) and normal at `bary` of triangle `t`.
+    fn sample(&self, t: usize, bary: [f32; 3]) -> Sample {
+        let c = self.atlas.map_or([1.0; 4], |a| a.sample(t, bary));
+        let n = self
+            .atlas
+            .and_then(|a| a.normal(t, bary))
+            .unwrap_or_else(|| {
+                let v = |k: usize| {
+                    self.indices
+                        .get(t * 3 + k)
+                        .and_then(|&i| self.normals.get(i as usize))
+                        .map_or(Vec3::ZERO, |&n| Vec3::from(n).normalize_or_zero())
+                };
+                (v(0) * bary[0] + v(1) * bary[1] + v(2) * bary[2]).normalize_or_zero()
+            });
+        [c[0], c[1], c[2], c[3], n.x, n.y, n.z]
     }
 }
 
@@ -715,21 +821,17 @@ impl ColorSource for SourceColors<'_> {
 pub struct FinerSurface<'a> {
     /// Per finer triangle (as indexed by `nearest`): its patch and its index there.
     owners: Vec<(u32, u32)>,
-    finer: &'a [&'a PatchTexture],
+    finer: &'a [FinerPatch<'a>],
     nearest: Nearest,
 }
 
 impl<'a> FinerSurface<'a> {
-    /// `finer[i]` is the texture of the finer patch `(positions, indices)` = `surfaces[i]`.
-    pub fn new(
-        surfaces: &[(&[[f32; 3]], &[u32])],
-        finer: &'a [&'a PatchTexture],
-    ) -> FinerSurface<'a> {
+    pub fn new(finer: &'a [FinerPatch<'a>]) -> FinerSurface<'a> {
         let mut tris = Vec::new();
         let mut owners = Vec::new();
-        for (m, (pos, idx)) in surfaces.iter().enumerate() {
-            for (t, tri) in idx.chunks_exact(3).enumerate() {
-                tris.push([0, 1, 2].map(|k| Vec3::from(pos[tri[k] as usize])));
+        for (m, f) in finer.iter().enumerate() {
+            for (t, tri) in f.indices.chunks_exact(3).enumerate() {
+                tris.push([0, 1, 2].map(|k| Vec3::from(f.positions[tri[k] as usize])));
                 owners.push((m as u32, t as u32));
             }
         }
@@ -750,6 +852,9 @@ pub struct Resampled<'a> {
     /// The finer triangle of the previous sample: texels are baked in scan order, so it is
     /// usually the answer or close to it ([`Nearest::closest_near`]).
     pub last: std::cell::Cell<Option<u32>>,
+    /// Whether normals are baked (a normal map): supersamples then never extrapolate a finer
+    /// patch's vertex normals beyond its triangle ([`SurfaceSource::sample_box`]).
+    pub normals: bool,
 }
 
 impl Resampled<'_> {
@@ -770,9 +875,25 @@ impl Resampled<'_> {
         Some(hit)
     }
 
-    fn finer_sample(&self, triangle: u32, bary: [f32; 3]) -> [f32; 4] {
+    fn finer_sample(&self, triangle: u32, bary: [f32; 3]) -> Sample {
         let (m, t) = self.finer.owners[triangle as usize];
         self.finer.finer[m as usize].sample(t as usize, bary)
+    }
+
+    /// How far outside finer triangle `triangle` a supersample may land and still be read
+    /// from it: [`EXTRAPOLATE`] where its patch's maps continue beyond it (an atlas chart), 0
+    /// where a baked normal would come from its vertex normals (a leaf's: extrapolated, they
+    /// overshoot on a rough surface).
+    fn reach(&self, triangle: u32) -> f32 {
+        let (m, _) = self.finer.owners[triangle as usize];
+        let mapped = self.finer.finer[m as usize]
+            .atlas
+            .is_some_and(|a| a.normals.is_some());
+        if self.normals && !mapped {
+            1e-4
+        } else {
+            EXTRAPOLATE
+        }
     }
 }
 
@@ -799,12 +920,15 @@ fn plane_bary(p: Vec3, t: &[Vec3; 3]) -> Option<[f32; 3]> {
 /// barycentric units) before it gets a closest-point query of its own.
 const EXTRAPOLATE: f32 = 0.5;
 
-impl ColorSource for Resampled<'_> {
-    fn sample(&self, tri: usize, bary: [f32; 3]) -> [f32; 4] {
+/// What a texel the finer surface does not reach gets.
+const NO_SAMPLE: Sample = [1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0];
+
+impl SurfaceSource for Resampled<'_> {
+    fn sample(&self, tri: usize, bary: [f32; 3]) -> Sample {
         let (c, n) = self.corners(tri);
         match self.closest(at(&c, bary), n) {
             Some(h) => self.finer_sample(h.triangle, h.bary),
-            None => [1.0; 4],
+            None => NO_SAMPLE,
         }
     }
 
@@ -815,25 +939,24 @@ impl ColorSource for Resampled<'_> {
     /// gutter beyond it. A supersample that would land far outside the triangle (a sliver,
     /// or a fold of the finer surface) gets its own query instead: a quarter of the queries
     /// of four independent samples, and the same colours where the finer surface is smooth.
-    fn sample_box(&self, tri: usize, centre: [f32; 3], points: &[[f32; 3]]) -> [f32; 4] {
+    fn sample_box(&self, tri: usize, centre: [f32; 3], points: &[[f32; 3]]) -> Sample {
         let (c, n) = self.corners(tri);
         let q = at(&c, centre);
         let Some(hit) = self.closest(q, n) else {
-            return [1.0; 4];
+            return NO_SAMPLE;
         };
         let Some(ft) = self.finer.nearest.triangle(hit.triangle) else {
             return self.finer_sample(hit.triangle, hit.bary);
         };
         let x = at(ft, hit.bary);
+        let reach = self.reach(hit.triangle);
         mean(points.iter().map(|&b| {
             let p = at(&c, b);
             match plane_bary(x + (p - q), ft) {
-                Some(fb) if fb.iter().all(|&v| v >= -EXTRAPOLATE) => {
-                    self.finer_sample(hit.triangle, fb)
-                }
+                Some(fb) if fb.iter().all(|&v| v >= -reach) => self.finer_sample(hit.triangle, fb),
                 _ => match self.closest(p, n) {
                     Some(h) => self.finer_sample(h.triangle, h.bary),
-                    None => [1.0; 4],
+                    None => NO_SAMPLE,
                 },
             }
         }))
@@ -842,6 +965,16 @@ impl ColorSource for Resampled<'_> {
 
 /// JPEG (baseline, 4:2:0, standard Huffman tables) of an atlas.
 pub fn encode_jpeg(image: &Texture, quality: u8) -> Vec<u8> {
+    jpeg(image, quality, jpeg_encoder::SamplingFactor::F_2_2)
+}
+
+/// JPEG of a normal map: as [`encode_jpeg`] but without chroma subsampling (4:4:4), as a
+/// normal's components all carry detail (4:2:0 halves the resolution of two of the three).
+pub fn encode_normal_jpeg(image: &Texture, quality: u8) -> Vec<u8> {
+    jpeg(image, quality, jpeg_encoder::SamplingFactor::F_1_1)
+}
+
+fn jpeg(image: &Texture, quality: u8, sampling: jpeg_encoder::SamplingFactor) -> Vec<u8> {
     let rgb: Vec<u8> = image
         .texels()
         .iter()
@@ -849,7 +982,7 @@ pub fn encode_jpeg(image: &Texture, quality: u8) -> Vec<u8> {
         .collect();
     let mut out = Vec::new();
     let mut encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
-    encoder.set_sampling_factor(jpeg_encoder::SamplingFactor::F_2_2);
+    encoder.set_sampling_factor(sampling);
     // Optimised Huffman tables (jpeg-encoder 0.6) come back garbled through `image`'s decoder
     // (checked in the tests below): the standard tables cost a few per cent and decode.
     let (w, h) = (image.width(), image.height());
@@ -936,16 +1069,21 @@ mod tests {
 
     /// Colour as a function of position, to compare bakes against.
     struct Field<'a>(&'a [[f32; 3]], &'a [u32]);
-    impl ColorSource for Field<'_> {
-        fn sample(&self, tri: usize, b: [f32; 3]) -> [f32; 4] {
+    impl SurfaceSource for Field<'_> {
+        fn sample(&self, tri: usize, b: [f32; 3]) -> Sample {
             let q = (0..3)
                 .map(|k| Vec3::from(self.0[self.1[tri * 3 + k] as usize]) * b[k])
                 .sum::<Vec3>();
+            // A normal that turns with position.
+            let n = Vec3::new(q.x.sin(), q.y.cos(), 1.0).normalize();
             [
                 q.x.fract().abs(),
                 q.y.fract().abs(),
                 (q.z + 0.5).clamp(0.0, 1.0),
                 1.0,
+                n.x,
+                n.y,
+                n.z,
             ]
         }
     }
@@ -987,31 +1125,52 @@ mod tests {
         let (pos, idx) = grid(16);
         let field = Field(&pos, &idx);
         let l = layout(&pos, &idx, 0.005);
-        let tex = bake(&l, &field, false);
+        let both = Maps {
+            color: true,
+            normals: true,
+        };
+        let tex = bake(&l, &field, false, both);
         // Sampling the atlas at triangle interiors gives back the field (to 8-bit rounding and
-        // bilinear interpolation of a smooth field).
-        let mut worst = 0f32;
+        // bilinear interpolation of a smooth field), colour and normal.
+        let (mut worst, mut worst_angle) = (0f32, 0f32);
         for t in 0..idx.len() / 3 {
             for b in [[0.6, 0.2, 0.2], [0.2, 0.6, 0.2], [1.0 / 3.0; 3]] {
                 let (a, e) = (tex.sample(t, b), field.sample(t, b));
                 for k in 0..3 {
                     worst = worst.max((a[k] - e[k]).abs());
                 }
+                let n = tex.normal(t, b).expect("a normal map").normalize();
+                let m = Vec3::new(e[4], e[5], e[6]);
+                worst_angle = worst_angle.max(n.dot(m).clamp(-1.0, 1.0).acos().to_degrees());
             }
         }
         assert!(worst < 0.06, "worst channel error {worst}");
+        assert!(worst_angle < 1.5, "worst normal error {worst_angle}°");
+        // A normal map alone.
+        let alone = bake(
+            &l,
+            &field,
+            false,
+            Maps {
+                color: false,
+                normals: true,
+            },
+        );
+        let texels = |t: &PatchTexture| t.normals.as_ref().map(|n| n.texels().to_vec());
+        assert!(alone.image.is_none() && texels(&alone) == texels(&tex));
         // A tiny texel size is capped by the budget.
         let big = layout(&pos, &idx, 1e-6);
         assert!(big.width as u64 * big.height as u64 <= MAX_TEXELS);
         assert!(big.texel_size > 1e-6);
-        let jpeg = encode_jpeg(&tex.image, 85);
+        let image = tex.image.as_ref().expect("colour");
+        let jpeg = encode_jpeg(image, 85);
         let back = Texture::decode(&jpeg).expect("decodes");
         assert_eq!((back.width(), back.height()), (l.width, l.height));
         // The JPEG keeps the colours (mean channel error of a few levels).
         let err: f64 = back
             .texels()
             .iter()
-            .zip(tex.image.texels())
+            .zip(image.texels())
             .map(|(a, b)| {
                 (0..3)
                     .map(|k| (a[k] as f64 - b[k] as f64).abs())

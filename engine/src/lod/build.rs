@@ -13,12 +13,13 @@
 //! patches live in scratch files between levels, and only a bucket or a group per worker is
 //! in memory at a time.
 
-use super::atlas::{self, FinerSurface, PatchTexture, Resampled, SourceColors};
+use super::atlas::{self, FinerPatch, FinerSurface, Maps, PatchTexture, Resampled, SourceColors};
 use super::bounds::{Sphere, merge_spheres, normal_cone, sphere_of_points};
 use super::buckets::{KdSplit, read_bucket, write_buckets};
 use super::codec::{self, Grid, PatchRef};
 use super::format::{
-    GroupRecord, HAS_COLORS, HAS_NORMALS, HAS_TEXTURE, Header, NO_GROUP, NodeRecord, TableWriter,
+    GroupRecord, HAS_COLORS, HAS_NORMAL_MAPS, HAS_NORMALS, HAS_TEXTURE, Header, NO_GROUP,
+    NodeRecord, TableWriter,
 };
 use super::fragment_quality::{self, Features};
 use super::grouping::{PatchOutline, group_patches};
@@ -63,6 +64,15 @@ pub struct BuildOptions {
     /// Measure every atlas' JPEG error against its raw texels ([`TextureReport`]; decodes
     /// each JPEG once more, for benchmarks).
     pub measure_textures: bool,
+    /// Bake a normal map into every coarse patch (issue 11 item 4, the progressive-transmission
+    /// paper): the finest surface's normals, so a coarse patch shades like the scan. Off by
+    /// default: `meshwiki-bench normals` measured no scan here on which they reach an image
+    /// quality in fewer bytes than the finer geometry does (`docs/FORMAT.md`, "Normal maps").
+    pub normal_maps: bool,
+    /// Texels of the normal maps along a coarse patch's mean triangle edge (where that is
+    /// finer than its error: a patch is drawn while its error projects to at most the pixel
+    /// threshold, so texels smaller than that only matter where triangles are larger).
+    pub normal_map_density: f32,
     /// How each group step simplifies (quadric collapses by default; see
     /// `meshwiki-bench simplify` for the comparison with the segment-driven method).
     pub simplifier: Simplifier,
@@ -77,6 +87,9 @@ pub const DEFAULT_MAX_PATCH_TRIANGLES: u32 = 4096;
 /// Progress stage of a textured build in which every atlas gets its JPEG (after the levels,
 /// before writing).
 pub const ATLAS_STAGE: &str = "encoding textures";
+
+/// JPEG quality of the normal maps.
+pub const NORMAL_MAP_QUALITY: u8 = 90;
 
 /// The default [`BuildOptions::texture_spread`] (`meshwiki-bench textures` measures it against
 /// uniform quality at equal bytes).
@@ -94,6 +107,8 @@ impl Default for BuildOptions {
             texture_quality: 85,
             texture_spread: DEFAULT_TEXTURE_SPREAD,
             measure_textures: false,
+            normal_maps: false,
+            normal_map_density: 4.0,
             simplifier: Simplifier::default(),
         }
     }
@@ -121,6 +136,16 @@ pub struct BuildReport {
     pub segments: Vec<u32>,
     /// The atlases' JPEGs (textured scans).
     pub textures: Option<TextureReport>,
+    /// The coarse patches' normal maps.
+    pub normal_maps: NormalMapBytes,
+}
+
+/// What the normal maps cost.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct NormalMapBytes {
+    /// Patches with a normal map.
+    pub maps: u32,
+    pub jpeg_bytes: u64,
 }
 
 /// What a textured build's atlases cost (issue 11, item 3).
@@ -401,6 +426,9 @@ struct Builder<'a> {
     /// Every patch's atlas, for the level above to resample (textured scans).
     atlases: ScratchFile,
     textured: bool,
+    /// Whether coarse patches get normal maps ([`BuildOptions::normal_maps`]).
+    normal_maps: bool,
+    normal_map_bytes: NormalMapBytes,
     /// The scratch directory.
     scratch: PathBuf,
     grid: Grid,
@@ -436,6 +464,8 @@ impl<'a> Builder<'a> {
             blobs: ScratchFile::create(&scratch.join("patches.blobs"))?,
             atlases: ScratchFile::create(&scratch.join("patches.atlases"))?,
             textured: ingested.face_uvs.is_some(),
+            normal_maps: options.normal_maps,
+            normal_map_bytes: NormalMapBytes::default(),
             scratch: scratch.to_path_buf(),
             grid,
             bounds: (ingested.bbox.0.into(), ingested.bbox.1.into()),
@@ -462,13 +492,13 @@ impl<'a> Builder<'a> {
             .push(("levels".to_string(), t.elapsed().as_secs_f64()));
 
         // 5. Atlases (textured scans) and write.
-        let textures = if builder.textured {
+        let textures = if builder.textured || builder.normal_maps {
             let t = Instant::now();
             let report = builder.place_atlases()?;
             builder
                 .stages
                 .push(("atlases".to_string(), t.elapsed().as_secs_f64()));
-            Some(report)
+            builder.textured.then_some(report)
         } else {
             None
         };
@@ -504,6 +534,7 @@ impl<'a> Builder<'a> {
             peak_rss_bytes: peak_rss_bytes(),
             segments: builder.segments.map(|(_, c)| c).unwrap_or_default(),
             textures,
+            normal_maps: builder.normal_map_bytes,
         })
     }
 
@@ -528,8 +559,9 @@ impl<'a> Builder<'a> {
             Some(t) => {
                 let bytes = atlas_to_bytes(t);
                 let offset = self.atlases.append(&bytes)?;
-                let features =
-                    fragment_quality::features(&patch.positions, &patch.indices, &t.image, &t.uvs);
+                let features = t.image.as_ref().map_or_else(Features::default, |image| {
+                    fragment_quality::features(&patch.positions, &patch.indices, image, &t.uvs)
+                });
                 (offset, bytes.len() as u32, features)
             }
             None => (0, 0, Features::default()),
@@ -812,13 +844,17 @@ impl<'a> Builder<'a> {
                             *c = c.saturating_add(1);
                         }
                     }
-                    let member_atlases = if this.textured {
+                    let maps = Maps {
+                        color: this.textured,
+                        normals: this.normal_maps,
+                    };
+                    let member_atlases = if maps.color || maps.normals {
                         members
                             .iter()
                             .map(|&m| this.load_atlas(pool_ref[m].node))
                             .collect::<io::Result<Vec<_>>>()?
                     } else {
-                        Vec::new()
+                        members.iter().map(|_| None).collect()
                     };
                     let shared_outside =
                         |id: u32| inside.get(&id).is_some_and(|&c| uses[id as usize] > c);
@@ -849,11 +885,18 @@ impl<'a> Builder<'a> {
                                 geometric,
                                 stored: (geometric as f64 + quantisation) as f32,
                             };
+                            let texel = if maps.normals {
+                                let density = this.options.normal_map_density.clamp(0.1, 16.0);
+                                errors.stored.min(mean_edge(&step.products) / density)
+                            } else {
+                                errors.stored
+                            };
                             let textures = coarse_atlases(
                                 &step.products,
                                 &patches,
                                 &member_atlases,
-                                errors.stored,
+                                texel,
+                                maps,
                             );
                             let stored = step
                                 .products
@@ -947,8 +990,10 @@ impl<'a> Builder<'a> {
     fn place_atlases(&mut self) -> Result<TextureReport, BuildError> {
         self.blobs.flush()?;
         self.atlases.flush()?;
+        // Fragment qualities are chosen among the colour atlases (every atlas of a textured
+        // scan; an untextured scan's hold normal maps alone).
         let textured: Vec<usize> = (0..self.nodes.len())
-            .filter(|&i| self.nodes[i].tex_len > 0)
+            .filter(|&i| self.textured && self.nodes[i].tex_len > 0)
             .collect();
         let levels: Vec<u32> = textured.iter().map(|&i| self.nodes[i].level).collect();
         let features: Vec<Features> = textured.iter().map(|&i| self.nodes[i].features).collect();
@@ -975,29 +1020,44 @@ impl<'a> Builder<'a> {
                 return Err(BuildError::Cancelled);
             }
             let this = &*self;
-            let done: Vec<io::Result<(Vec<u8>, Option<TextureBytes>)>> = chunk
+            type Placed = (Vec<u8>, Option<TextureBytes>, Option<usize>);
+            let done: Vec<io::Result<Placed>> = chunk
                 .par_iter()
                 .map(|&i| {
                     let n = &this.nodes[i];
                     let blob = this.blobs.read(n.blob_offset, n.blob_len as usize)?;
-                    let (Some((q, _)), Some(atlas)) = (quality[i], this.load_atlas(i as u32)?)
-                    else {
-                        return Ok((blob, None));
+                    let Some(atlas) = this.load_atlas(i as u32)? else {
+                        return Ok((blob, None, None));
                     };
-                    let jpeg = atlas::encode_jpeg(&atlas.image, q);
-                    let blob = codec::with_image(&blob, &jpeg)
+                    let color = match (quality[i], &atlas.image) {
+                        (Some((q, _)), Some(image)) => Some(atlas::encode_jpeg(image, q)),
+                        _ => None,
+                    };
+                    let normals = atlas
+                        .normals
+                        .as_ref()
+                        .map(|n| atlas::encode_normal_jpeg(n, NORMAL_MAP_QUALITY));
+                    let blob = codec::with_images(&blob, color.as_deref(), normals.as_deref())
                         .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
-                    let measured = measure_atlas(
-                        &atlas,
-                        &jpeg,
-                        n.features.covered_texels,
-                        this.options.measure_textures,
-                    )?;
-                    Ok((blob, Some(measured)))
+                    let measured = match (&color, &atlas.image) {
+                        (Some(jpeg), Some(image)) => Some(measure_atlas(
+                            image,
+                            &atlas.uvs,
+                            jpeg,
+                            n.features.covered_texels,
+                            this.options.measure_textures,
+                        )?),
+                        _ => None,
+                    };
+                    Ok((blob, measured, normals.map(|n| n.len())))
                 })
                 .collect();
             for (&i, result) in chunk.iter().zip(done) {
-                let (blob, measured) = result?;
+                let (blob, measured, normal_bytes) = result?;
+                if let Some(b) = normal_bytes {
+                    self.normal_map_bytes.maps += 1;
+                    self.normal_map_bytes.jpeg_bytes += b as u64;
+                }
                 let n = &mut self.nodes[i];
                 n.blob_offset = placed.append(&blob)?;
                 n.blob_len = blob.len() as u32;
@@ -1096,6 +1156,9 @@ impl<'a> Builder<'a> {
         if self.textured {
             flags |= HAS_TEXTURE;
         }
+        if self.normal_map_bytes.maps > 0 {
+            flags |= HAS_NORMAL_MAPS;
+        }
         let header = Header {
             flags,
             level_count: self.nodes.iter().map(|n| n.level).max().unwrap_or(0) + 1,
@@ -1133,7 +1196,8 @@ impl<'a> Builder<'a> {
 /// One fragment's bytes, covered texels (counted with its features) and, when `measure`, JPEG
 /// error over those texels.
 fn measure_atlas(
-    atlas: &PatchTexture,
+    image: &mesh::Texture,
+    uvs: &[[f32; 2]],
     jpeg: &[u8],
     covered_texels: u64,
     measure: bool,
@@ -1145,14 +1209,14 @@ fn measure_atlas(
         ..TextureBytes::default()
     };
     if measure {
-        let (w, h) = (atlas.image.width() as usize, atlas.image.height() as usize);
-        let covered = fragment_quality::coverage(w, h, &atlas.uvs);
+        let (w, h) = (image.width() as usize, image.height() as usize);
+        let covered = fragment_quality::coverage(w, h, uvs);
         let back = mesh::Texture::decode(jpeg).map_err(io::Error::other)?;
-        let ssim = fragment_quality::ssim_map(&atlas.image, &back)
+        let ssim = fragment_quality::ssim_map(image, &back)
             .ok_or_else(|| io::Error::other("the JPEG decodes to another size"))?;
         for (((&c, a), b), s) in covered
             .iter()
-            .zip(atlas.image.texels())
+            .zip(image.texels())
             .zip(back.texels())
             .zip(ssim)
         {
@@ -1184,7 +1248,34 @@ fn leaf_atlas(
         faces,
         textures,
     };
-    atlas::bake(&layout, &source, false)
+    atlas::bake(
+        &layout,
+        &source,
+        false,
+        Maps {
+            color: true,
+            normals: false,
+        },
+    )
+}
+
+/// Mean edge length of the patches' triangles (infinite for none).
+fn mean_edge(patches: &[BuildPatch]) -> f32 {
+    let (mut sum, mut n) = (0f64, 0u64);
+    for p in patches {
+        let v = |i: u32| glam::Vec3::from(p.positions[i as usize]);
+        for t in p.indices.chunks_exact(3) {
+            sum += f64::from(
+                v(t[0]).distance(v(t[1])) + v(t[1]).distance(v(t[2])) + v(t[2]).distance(v(t[0])),
+            );
+            n += 3;
+        }
+    }
+    if n == 0 {
+        f32::INFINITY
+    } else {
+        (sum / n as f64) as f32
+    }
 }
 
 /// Texel size of a patch without source texture: about eight texels per triangle.
@@ -1200,29 +1291,68 @@ fn fallback_texel_size(patch: &BuildPatch) -> f32 {
         .max(1e-12)
 }
 
-/// Atlases of a group's products, resampled from its members' (none when the members have
-/// none). Texels are as large as the products' error (a patch is drawn while its error is
+/// Atlases of a group's products, resampled from its members': colour where the members
+/// have it (`maps.color`: none unless every member has), normal maps where `maps.normals`
+/// (from the members' normal maps, or their vertex normals where they have none: leaves).
+/// Texels are `texel` large (about the products' error: a patch is drawn while its error is
 /// at most a pixel) but never finer than the members'.
 fn coarse_atlases(
     products: &[BuildPatch],
     members: &[BuildPatch],
     member_atlases: &[Option<PatchTexture>],
-    error: f32,
+    texel: f32,
+    maps: Maps,
 ) -> Vec<Option<PatchTexture>> {
-    if member_atlases.is_empty() || member_atlases.iter().any(|a| a.is_none()) {
+    let maps = Maps {
+        color: maps.color
+            && member_atlases.len() == members.len()
+            && member_atlases
+                .iter()
+                .all(|a| a.as_ref().is_some_and(|a| a.image.is_some())),
+        normals: maps.normals,
+    };
+    if !maps.color && !maps.normals {
         return products.iter().map(|_| None).collect();
     }
-    let finer: Vec<&PatchTexture> = member_atlases.iter().flatten().collect();
-    let finest = finer
+    let finest = member_atlases
         .iter()
+        .flatten()
         .map(|a| a.texel_size)
         .fold(f32::INFINITY, f32::min);
-    let texel = error.max(finest);
-    let surfaces: Vec<(&[[f32; 3]], &[u32])> = members
+    // (Members without atlas, leaves of an untextured scan, set no floor.)
+    let texel = if finest.is_finite() {
+        texel.max(finest)
+    } else {
+        texel
+    };
+    // A member without normal map (a leaf) shades with the normals its decoder computes from
+    // its triangles (`codec`: area-weighted, as every client does inside a patch).
+    let computed: Vec<Vec<[f32; 3]>> = members
         .iter()
-        .map(|m| (&m.positions[..], &m.indices[..]))
+        .enumerate()
+        .map(|(i, m)| {
+            let mapped = member_atlases
+                .get(i)
+                .is_some_and(|a| a.as_ref().is_some_and(|a| a.normals.is_some()));
+            if maps.normals && !mapped {
+                codec::computed_normals(&m.positions, &m.indices)
+            } else {
+                Vec::new()
+            }
+        })
         .collect();
-    let surface = FinerSurface::new(&surfaces, &finer);
+    let finer: Vec<FinerPatch> = members
+        .iter()
+        .zip(&computed)
+        .enumerate()
+        .map(|(i, (m, normals))| FinerPatch {
+            positions: &m.positions,
+            indices: &m.indices,
+            normals,
+            atlas: member_atlases.get(i).and_then(Option::as_ref),
+        })
+        .collect();
+    let surface = FinerSurface::new(&finer);
     products
         .iter()
         .map(|p| {
@@ -1232,40 +1362,63 @@ fn coarse_atlases(
                 indices: &p.indices,
                 finer: &surface,
                 last: Default::default(),
+                normals: maps.normals,
             };
-            Some(atlas::bake(&layout, &source, true))
+            Some(atlas::bake(&layout, &source, true, maps))
         })
         .collect()
 }
 
-/// Scratch form of an atlas (native layout; never leaves the build machine).
+/// Scratch form of an atlas (native layout; never leaves the build machine): width, height,
+/// texel size, corner count, which images (bit 0 colour, bit 1 normals), then their texels
+/// and the corners' coordinates.
 fn atlas_to_bytes(t: &PatchTexture) -> Vec<u8> {
-    let mut out = Vec::with_capacity(16 + t.image.texels().len() * 4 + t.uvs.len() * 8);
-    out.extend_from_slice(&t.image.width().to_le_bytes());
-    out.extend_from_slice(&t.image.height().to_le_bytes());
+    let images = [&t.image, &t.normals];
+    let first = images.iter().find_map(|i| i.as_ref());
+    let (w, h) = first.map_or((0, 0), |i| (i.width(), i.height()));
+    let texels = w as usize * h as usize * 4;
+    let mut out = Vec::with_capacity(20 + 2 * texels + t.uvs.len() * 8);
+    out.extend_from_slice(&w.to_le_bytes());
+    out.extend_from_slice(&h.to_le_bytes());
     out.extend_from_slice(&t.texel_size.to_le_bytes());
     out.extend_from_slice(&(t.uvs.len() as u32).to_le_bytes());
-    out.extend_from_slice(bytemuck::cast_slice(t.image.texels()));
+    let which = u32::from(t.image.is_some()) | (u32::from(t.normals.is_some()) << 1);
+    out.extend_from_slice(&which.to_le_bytes());
+    for image in images.into_iter().flatten() {
+        out.extend_from_slice(bytemuck::cast_slice(image.texels()));
+    }
     out.extend_from_slice(bytemuck::cast_slice(&t.uvs));
     out
 }
 
 fn atlas_from_bytes(bytes: &[u8]) -> io::Result<PatchTexture> {
     let bad = || io::Error::new(io::ErrorKind::InvalidData, "corrupt scratch atlas");
-    let word = |i: usize| -> io::Result<[u8; 4]> {
+    let word = |i: usize| -> io::Result<u32> {
         let b = bytes.get(i * 4..i * 4 + 4).ok_or_else(bad)?;
-        Ok([b[0], b[1], b[2], b[3]])
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     };
-    let (w, h) = (u32::from_le_bytes(word(0)?), u32::from_le_bytes(word(1)?));
-    let texel_size = f32::from_le_bytes(word(2)?);
-    let n = u32::from_le_bytes(word(3)?) as usize;
-    let texels_end = 16 + w as usize * h as usize * 4;
-    let texels = bytes.get(16..texels_end).ok_or_else(bad)?;
-    let uvs = bytes.get(texels_end..texels_end + n * 8).ok_or_else(bad)?;
-    let image =
-        mesh::Texture::from_texels(w, h, bytemuck::pod_collect_to_vec(texels)).ok_or_else(bad)?;
+    let (w, h) = (word(0)?, word(1)?);
+    let texel_size = f32::from_bits(word(2)?);
+    let n = word(3)? as usize;
+    let which = word(4)?;
+    let size = w as usize * h as usize * 4;
+    let mut at = 20;
+    let mut image = |present: bool| -> io::Result<Option<mesh::Texture>> {
+        if !present {
+            return Ok(None);
+        }
+        let texels = bytes.get(at..at + size).ok_or_else(bad)?;
+        at += size;
+        mesh::Texture::from_texels(w, h, bytemuck::pod_collect_to_vec(texels))
+            .ok_or_else(bad)
+            .map(Some)
+    };
+    let color = image(which & 1 != 0)?;
+    let normals = image(which & 2 != 0)?;
+    let uvs = bytes.get(at..at + n * 8).ok_or_else(bad)?;
     Ok(PatchTexture {
-        image,
+        image: color,
+        normals,
         uvs: bytemuck::pod_collect_to_vec(uvs),
         texel_size,
     })

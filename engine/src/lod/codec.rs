@@ -53,8 +53,10 @@ const COMPRESSION_ZSTD: u8 = 1;
 const FLAG_COLORS: u32 = 1;
 const FLAG_NORMALS: u32 = 2;
 const FLAG_UVS: u32 = 4;
-/// Blob header flag (byte 5): an image section follows the 12-byte header.
+/// Blob header flag (byte 5): an image section (the colour atlas) follows the 12-byte header.
 const BLOB_IMAGE: u8 = 1;
+/// Blob header flag (byte 5): a normal-map section follows (after the image section, if any).
+const BLOB_NORMALS: u8 = 2;
 const PAYLOAD_HEADER: usize = 52;
 /// Octahedral normal quantisation: components in `-OCT_SCALE..=OCT_SCALE` (8 bits).
 pub const OCT_SCALE: f64 = 127.0;
@@ -228,6 +230,8 @@ pub struct Patch {
     pub uvs: Vec<[f32; 2]>,
     /// The patch's atlas (JPEG), when it has one.
     pub image: Option<Vec<u8>>,
+    /// The patch's normal map (JPEG, same layout as the atlas), when it has one.
+    pub normal_map: Option<Vec<u8>>,
 }
 
 /// Input of [`encode`]: a patch with positions already on the grid.
@@ -833,13 +837,9 @@ fn encode_split(
     let image = texture.map(|(_, image)| image);
     let mut blob = Vec::with_capacity(16 + image.map_or(0, |i| i.len()) + body.len());
     blob.extend_from_slice(if v3 { &BLOB_MAGIC } else { &BLOB_MAGIC_V2 });
-    let blob_flags = if image.is_some() { BLOB_IMAGE } else { 0 };
-    blob.extend_from_slice(&[compression, blob_flags, 0, 0]);
+    blob.extend_from_slice(&[compression, 0, 0, 0]);
     blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-    if let Some(image) = image {
-        blob.extend_from_slice(&(image.len() as u32).to_le_bytes());
-        blob.extend_from_slice(image);
-    }
+    push_sections(&mut blob, image, None);
     blob.extend_from_slice(&body);
     if v3 && !decodes_back(&blob, &indices, &decoded_pos, min, &ids) {
         // Never seen: the front coder and its decoder mirror each other, and tests hold them
@@ -853,23 +853,58 @@ fn encode_split(
     (blob, used)
 }
 
-/// `blob` with its image section holding `image`: the build encodes a textured patch before
-/// its atlas' quality is known (an empty image section) and puts the JPEG in when writing
-/// ([`super::fragment_quality`]). Refused for a blob without an image section.
-pub fn with_image(blob: &[u8], image: &[u8]) -> Result<Vec<u8>, CodecError> {
-    if blob.len() < 16 || blob[5] & BLOB_IMAGE == 0 {
+/// Appends the image sections to a blob header (12 bytes, flags at byte 5 set here). An
+/// image is a JPEG of at most [`super::atlas::MAX_SIDE`]² texels: far below 4 GiB.
+fn push_sections(blob: &mut Vec<u8>, image: Option<&[u8]>, normals: Option<&[u8]>) {
+    blob[5] = 0;
+    for (flag, section) in [(BLOB_IMAGE, image), (BLOB_NORMALS, normals)] {
+        if let Some(bytes) = section {
+            blob[5] |= flag;
+            blob.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
+            blob.extend_from_slice(bytes);
+        }
+    }
+}
+
+/// The image sections of a blob (colour, normal map) and where its body starts.
+type Sections<'a> = (Option<&'a [u8]>, Option<&'a [u8]>, usize);
+
+fn sections(blob: &[u8]) -> Result<Sections<'_>, CodecError> {
+    let mut at = 12usize;
+    let mut section = |flag: u8| -> Result<Option<&[u8]>, CodecError> {
+        if blob.get(5).is_none_or(|f| f & flag == 0) {
+            return Ok(None);
+        }
+        let len = u32_at(blob, at)? as usize;
+        let start = at + 4;
+        let end = start.checked_add(len).ok_or(CodecError::Truncated)?;
+        let bytes = blob.get(start..end).ok_or(CodecError::Truncated)?;
+        at = end;
+        Ok(Some(bytes))
+    };
+    let image = section(BLOB_IMAGE)?;
+    let normals = section(BLOB_NORMALS)?;
+    Ok((image, normals, at))
+}
+
+/// `blob` with its image sections holding `image` (the colour atlas) and `normals` (the normal
+/// map), each present or not: the build encodes a textured patch before its atlas' quality is
+/// known and puts the JPEGs in when writing ([`super::fragment_quality`]).
+pub fn with_images(
+    blob: &[u8],
+    image: Option<&[u8]>,
+    normals: Option<&[u8]>,
+) -> Result<Vec<u8>, CodecError> {
+    if blob.len() < 12 {
         return Err(CodecError::Truncated);
     }
-    let old = u32_at(blob, 12)? as usize;
-    let body = blob
-        .get(16usize.checked_add(old).ok_or(CodecError::Truncated)?..)
-        .ok_or(CodecError::Truncated)?;
-    let len = u32::try_from(image.len()).map_err(|_| CodecError::Sizes)?;
-    let mut out = Vec::with_capacity(16 + image.len() + body.len());
+    let (_, _, body) = sections(blob)?;
+    let mut out = Vec::with_capacity(
+        blob.len() + 8 + image.map_or(0, <[u8]>::len) + normals.map_or(0, <[u8]>::len),
+    );
     out.extend_from_slice(&blob[..12]);
-    out.extend_from_slice(&len.to_le_bytes());
-    out.extend_from_slice(image);
-    out.extend_from_slice(body);
+    push_sections(&mut out, image, normals);
+    out.extend_from_slice(&blob[body..]);
     Ok(out)
 }
 
@@ -924,6 +959,8 @@ pub struct BlobBytes {
     pub header: usize,
     /// The texture atlas image (JPEG), stored as is.
     pub image: usize,
+    /// The normal map (JPEG), stored as is.
+    pub normal_map: usize,
     /// The payload's own header (counts, flags, grid minimum, stream lengths).
     pub payload_header: usize,
     /// Each stream before compression, in [`STREAM_NAMES`] order.
@@ -938,6 +975,9 @@ struct Framed<'a> {
     /// `MWP3` (else `MWP2`).
     v3: bool,
     image: Option<&'a [u8]>,
+    normals: Option<&'a [u8]>,
+    /// Bytes before the body: header and sections.
+    head: usize,
     body: &'a [u8],
     payload: Vec<u8>,
 }
@@ -957,14 +997,8 @@ fn unframe(blob: &[u8], max_payload: usize) -> Result<Framed<'_>, CodecError> {
     if payload_len > max_payload {
         return Err(CodecError::Sizes);
     }
-    let (image, body) = if blob[5] & BLOB_IMAGE != 0 {
-        let len = u32_at(blob, 12)? as usize;
-        let end = 16usize.checked_add(len).ok_or(CodecError::Truncated)?;
-        let image = blob.get(16..end).ok_or(CodecError::Truncated)?;
-        (Some(image), &blob[end..])
-    } else {
-        (None, &blob[12..])
-    };
+    let (image, normals, head) = sections(blob)?;
+    let body = &blob[head..];
     let payload = match blob[4] {
         COMPRESSION_NONE => body.to_vec(),
         COMPRESSION_ZSTD => zstd::bulk::decompress(body, payload_len)
@@ -977,6 +1011,8 @@ fn unframe(blob: &[u8], max_payload: usize) -> Result<Framed<'_>, CodecError> {
     Ok(Framed {
         v3,
         image,
+        normals,
+        head,
         body,
         payload,
     })
@@ -986,7 +1022,9 @@ fn unframe(blob: &[u8], max_payload: usize) -> Result<Framed<'_>, CodecError> {
 /// [`decode_limited`] reads it).
 pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
     let framed = unframe(blob, 64 << 20)?;
-    let (image, header) = framed.image.map_or((0, 12), |i| (i.len(), 16));
+    let image = framed.image.map_or(0, <[u8]>::len);
+    let normal_map = framed.normals.map_or(0, <[u8]>::len);
+    let header = framed.head - image - normal_map;
     let (body, payload) = (framed.body, framed.payload);
     let mut streams = [0usize; 6];
     for (i, l) in streams.iter_mut().enumerate() {
@@ -1000,6 +1038,7 @@ pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
             stored: blob.len(),
             header,
             image,
+            normal_map,
             payload_header: PAYLOAD_HEADER,
             streams,
             body: body.len(),
@@ -1020,9 +1059,14 @@ pub fn decode(blob: &[u8], grid: &Grid) -> Result<Patch, CodecError> {
 pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Patch, CodecError> {
     let max_triangles = max_triangles.min(MAX_ELEMENTS);
     let Framed {
-        v3, image, payload, ..
+        v3,
+        image,
+        normals: normal_map,
+        payload,
+        ..
     } = unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
     let image = image.map(<[u8]>::to_vec);
+    let normal_map = normal_map.map(<[u8]>::to_vec);
     let vertex_count = u32_at(&payload, 0)?;
     let triangle_count = u32_at(&payload, 4)?;
     let flags = u32_at(&payload, 8)?;
@@ -1198,6 +1242,7 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         grid_positions,
         uvs,
         image,
+        normal_map,
     })
 }
 
@@ -1373,28 +1418,33 @@ mod tests {
             },
             3,
         );
-        let filled = with_image(&empty, &image).expect("has an image section");
+        let filled = with_images(&empty, Some(&image), None).expect("a blob");
         assert_eq!(filled, blob);
-        let refilled = with_image(&filled, &[9, 9]).expect("has an image section");
+        // A normal map beside the image, or alone (an untextured scan's coarse patch).
+        let refilled = with_images(&filled, Some(&[9, 9]), Some(&[7, 7, 7])).expect("a blob");
         let q = decode(&refilled, &grid).expect("decodes");
         assert_eq!(q.image.as_deref(), Some(&[9u8, 9][..]));
+        assert_eq!(q.normal_map.as_deref(), Some(&[7u8, 7, 7][..]));
         assert_eq!(
-            (q.positions, q.indices),
-            (p.positions.clone(), p.indices.clone())
+            (&q.positions, &q.indices, &q.uvs),
+            (&p.positions, &p.indices, &p.uvs)
         );
-        assert!(
-            with_image(
-                &encode(
-                    &PatchRef {
-                        texture: None,
-                        ..patch
-                    },
-                    3
-                ),
-                &image
-            )
-            .is_err()
-        );
+        let (bytes, _) = blob_bytes(&refilled).expect("frames");
+        assert_eq!((bytes.header, bytes.image, bytes.normal_map), (20, 2, 3));
+        let alone = with_images(&refilled, None, Some(&[5])).expect("a blob");
+        let r = decode(&alone, &grid).expect("decodes");
+        assert_eq!((r.image, r.normal_map.as_deref()), (None, Some(&[5u8][..])));
+        assert_eq!((&r.positions, &r.uvs), (&p.positions, &p.uvs));
+        assert_eq!(with_images(&alone, None, None).expect("a blob"), {
+            let mut plain = empty[..12].to_vec();
+            plain[5] = 0;
+            plain.extend_from_slice(&empty[16..]);
+            plain
+        });
+        // A declared normal map longer than the blob is refused.
+        let mut bad = alone.clone();
+        bad[12..16].copy_from_slice(&(alone.len() as u32).to_le_bytes());
+        assert!(decode(&bad, &grid).is_err());
         // One extra vertex per row on the chart border (x = 6 belongs to both halves).
         assert_eq!(p.positions.len(), 12 * 12 + 12);
         assert_eq!(vertices, p.positions.len());

@@ -8,7 +8,7 @@
 //! qualifies.
 
 use super::bounds::{Sphere, back_facing};
-use super::format::NodeRecord;
+use super::format::{NO_GROUP, NodeRecord};
 use crate::camera::Camera;
 use glam::Vec3;
 
@@ -89,5 +89,120 @@ pub fn cut_view(
                 && projected_error(camera, n.parent_sphere, n.parent_error) > pixel_error
                 && visible(camera, n, culling)
         })
+        .collect()
+}
+
+/// Silhouette-first refinement (issue 11 item 4, the progressive-transmission paper §4.1):
+/// where normal maps carry a coarse patch's shading, only its outline shows its geometric
+/// error, so a group whose coarse surface wholly faces the camera (every product's normal
+/// cone front-facing from all of its bounds) refines at `interior_factor` times the pixel
+/// threshold, and the others (the silhouette, back faces seen through holes, products whose
+/// normals spread too far to bound) at the threshold itself.
+///
+/// That score is not monotone along the DAG (a group that faces the camera can sit over one
+/// that does not), so the cut is made top-down, as the viewer's (`static/js/lod/cut.js`):
+/// from the roots, groups are taken coarsest first and one refines (its members replace its
+/// products) only when all its products are in the cut. Every cut is then a set of whole
+/// groups' products: crack-free, one patch per surface region. With a factor of 1 it is
+/// [`cut_view`]'s cut.
+pub struct Silhouette {
+    /// Groups, coarsest first: (products, members).
+    groups: Vec<(Vec<u32>, Vec<u32>)>,
+    roots: Vec<u32>,
+    pub interior_factor: f32,
+}
+
+impl Silhouette {
+    pub fn new(nodes: &[NodeRecord], interior_factor: f32) -> Silhouette {
+        let count = nodes
+            .iter()
+            .flat_map(|n| [n.producer, n.member_of])
+            .filter(|&g| g != NO_GROUP)
+            .map(|g| g as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let mut groups = vec![(Vec::new(), Vec::new()); count];
+        let mut level = vec![0u32; count];
+        let mut roots = Vec::new();
+        for (i, n) in nodes.iter().enumerate() {
+            if let Some(g) = groups.get_mut(n.producer as usize) {
+                g.0.push(i as u32);
+                level[n.producer as usize] = level[n.producer as usize].max(n.level);
+            }
+            match groups.get_mut(n.member_of as usize) {
+                Some(g) => g.1.push(i as u32),
+                None => roots.push(i as u32),
+            }
+        }
+        let mut order: Vec<usize> = (0..count).collect();
+        order.sort_by_key(|&g| std::cmp::Reverse(level[g]));
+        let groups = order
+            .into_iter()
+            .map(|g| std::mem::take(&mut groups[g]))
+            .collect();
+        Silhouette {
+            groups,
+            roots,
+            interior_factor,
+        }
+    }
+
+    /// Whether every product of a group faces the camera: its normal cone, or where its
+    /// normals spread wider than [`INTERIOR_SPREAD`] (a rough surface: the bumps of a relief
+    /// face every way), a cone of that spread around its mean normal. A bump's own outline is
+    /// within the patch's error, which the factor lets grow to `interior_factor` pixels.
+    fn interior(nodes: &[NodeRecord], products: &[u32], eye: Vec3) -> bool {
+        products.iter().all(|&p| {
+            let n = &nodes[p as usize];
+            let mut cone = n.cone;
+            cone[3] = cone[3].min(INTERIOR_SPREAD);
+            front_facing(cone, n.bounds, eye)
+        })
+    }
+}
+
+/// Sine of the widest normal spread [`Silhouette`] takes into account (30°).
+pub const INTERIOR_SPREAD: f32 = 0.5;
+
+/// Whether every normal of `cone` faces a camera at `eye` from every point of `sphere`.
+pub fn front_facing(cone: [f32; 4], sphere: Sphere, eye: Vec3) -> bool {
+    back_facing([-cone[0], -cone[1], -cone[2], cone[3]], sphere, eye)
+}
+
+/// [`cut_view`] with silhouette-first refinement ([`Silhouette`]).
+pub fn cut_view_silhouette(
+    nodes: &[NodeRecord],
+    camera: &Camera,
+    pixel_error: f32,
+    culling: Culling,
+    silhouette: &Silhouette,
+) -> Vec<u32> {
+    let mut in_cut = vec![false; nodes.len()];
+    for &r in &silhouette.roots {
+        in_cut[r as usize] = true;
+    }
+    for (products, members) in &silhouette.groups {
+        let Some(&first) = products.first() else {
+            continue;
+        };
+        if !products.iter().all(|&p| in_cut[p as usize]) {
+            continue;
+        }
+        let n = &nodes[first as usize];
+        let mut score = projected_error(camera, n.lod_sphere, n.lod_error);
+        if silhouette.interior_factor != 1.0 && Silhouette::interior(nodes, products, camera.eye) {
+            score /= silhouette.interior_factor;
+        }
+        if score > pixel_error {
+            for &p in products {
+                in_cut[p as usize] = false;
+            }
+            for &m in members {
+                in_cut[m as usize] = true;
+            }
+        }
+    }
+    (0..nodes.len() as u32)
+        .filter(|&i| in_cut[i as usize] && visible(camera, &nodes[i as usize], culling))
         .collect()
 }

@@ -29,6 +29,8 @@ pub const HAS_COLORS: u32 = 1;
 pub const HAS_NORMALS: u32 = 2;
 /// Every patch carries a texture atlas (`docs/FORMAT.md`, patch blob).
 pub const HAS_TEXTURE: u32 = 4;
+/// Coarse patches carry normal maps (`docs/FORMAT.md`, patch blob).
+pub const HAS_NORMAL_MAPS: u32 = 8;
 
 /// Fixed-size file header.
 #[repr(C)]
@@ -322,6 +324,11 @@ impl LodFile {
     /// Whether every patch carries a texture atlas.
     pub fn has_texture(&self) -> bool {
         self.header.flags & HAS_TEXTURE != 0
+    }
+
+    /// Whether coarse patches carry normal maps.
+    pub fn has_normal_maps(&self) -> bool {
+        self.header.flags & HAS_NORMAL_MAPS != 0
     }
 
     /// The whole file (for serving byte ranges).

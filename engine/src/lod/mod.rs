@@ -31,7 +31,9 @@ pub use build::{
     BuildError, BuildOptions, BuildReport, build_file, build_from, build_mesh, peak_rss_bytes,
 };
 pub use codec::{Grid, Patch};
-pub use cut::{Culling, cut_uniform, cut_view, projected_error};
+pub use cut::{
+    Culling, Silhouette, cut_uniform, cut_view, cut_view_silhouette, front_facing, projected_error,
+};
 pub use export::{CutMesh, export_cut};
 pub use format::{FormatError, GroupRecord, LodFile, NO_GROUP, NodeRecord};
 

@@ -168,6 +168,30 @@ impl Texture {
     /// Bilinear sample in linear light. `(u, v)` use the glTF convention: `v = 0` is the top
     /// row of the image (OBJ callers pass `1 - v`). Non-finite coordinates sample (0, 0).
     pub fn sample(&self, u: f32, v: f32, wrap_s: Wrap, wrap_t: Wrap) -> [f32; 4] {
+        self.bilinear(u, v, wrap_s, wrap_t, |t| {
+            [
+                srgb_to_linear(t[0]),
+                srgb_to_linear(t[1]),
+                srgb_to_linear(t[2]),
+                t[3] as f32 / 255.0,
+            ]
+        })
+    }
+
+    /// Bilinear sample of the bytes as they are (`byte / 255`, no sRGB curve): for images
+    /// that hold data rather than colour (normal maps).
+    pub fn sample_unorm(&self, u: f32, v: f32, wrap_s: Wrap, wrap_t: Wrap) -> [f32; 4] {
+        self.bilinear(u, v, wrap_s, wrap_t, |t| t.map(|c| c as f32 / 255.0))
+    }
+
+    fn bilinear(
+        &self,
+        u: f32,
+        v: f32,
+        wrap_s: Wrap,
+        wrap_t: Wrap,
+        value: impl Fn([u8; 4]) -> [f32; 4],
+    ) -> [f32; 4] {
         let (x0, x1, fx) = axis(u, self.width, wrap_s);
         let (y0, y1, fy) = axis(v, self.height, wrap_t);
         let w = self.width as usize;
@@ -177,12 +201,7 @@ impl Texture {
                 .get(y * w + x)
                 .copied()
                 .unwrap_or([0, 0, 0, 255]);
-            [
-                srgb_to_linear(t[0]),
-                srgb_to_linear(t[1]),
-                srgb_to_linear(t[2]),
-                t[3] as f32 / 255.0,
-            ]
+            value(t)
         };
         let (a, b, c, d) = (texel(x0, y0), texel(x1, y0), texel(x0, y1), texel(x1, y1));
         let mut out = [0.0; 4];

@@ -83,7 +83,12 @@ pub struct GpuPatch {
     /// The patch's streams: a storage buffer (ids, for the fragment shaders) that is also the
     /// vertex and index buffer of its draw.
     pub buffer: wgpu::Buffer,
+    /// Whether its colour comes from its atlas.
+    pub color_atlas: bool,
+    /// Whether it has a normal map.
+    pub normal_map: bool,
     _atlas: Option<wgpu::Texture>,
+    _normal_map: Option<wgpu::Texture>,
     /// Original vertex ids (CPU copy, for highlight masks).
     pub original_ids: Vec<u32>,
     /// Smallest and largest original id.
@@ -289,17 +294,20 @@ impl PatchCache {
         let n = patch.positions.len();
         let t = patch.indices.len() / 3;
         let colors = has_colors && patch.colors.len() == n;
-        let image = match patch.image.as_deref() {
+        let decode = |bytes: Option<&[u8]>, what: &str| match bytes {
             Some(bytes) if patch.uvs.len() == n => match Texture::decode(bytes) {
                 Ok(img) => Some(img),
                 Err(e) => {
-                    tracing::warn!(node, error = %e, "patch atlas does not decode");
+                    tracing::warn!(node, error = %e, "patch {what} does not decode");
                     None
                 }
             },
             _ => None,
         };
-        let layout = PatchLayout::with_uvs(n as u32, t as u32, colors, image.is_some());
+        let image = decode(patch.image.as_deref(), "atlas");
+        let normal_image = decode(patch.normal_map.as_deref(), "normal map");
+        let uvs = image.is_some() || normal_image.is_some();
+        let layout = PatchLayout::with_uvs(n as u32, t as u32, colors, uvs);
         let words_len = (layout.words as usize).max(1);
         let mut usage =
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX;
@@ -342,7 +350,7 @@ impl PatchCache {
             put(&mut scratch);
             scratch.extend_from_slice(&patch.indices[..t * 3]);
             put(&mut scratch);
-            if image.is_some() {
+            if uvs {
                 scratch.extend(patch.uvs.iter().map(|uv| {
                     let q = uv.map(|x| (x.clamp(0.0, 1.0) * 65535.0 + 0.5) as u32);
                     q[0] | (q[1] << 16)
@@ -361,6 +369,18 @@ impl PatchCache {
             )
         });
         let atlas_view = atlas.as_ref().map(|a| a.create_view(&Default::default()));
+        let normal_map = normal_image.as_ref().map(|img| {
+            atlas_texture(
+                device,
+                queue,
+                img.width(),
+                img.height(),
+                bytemuck::cast_slice(img.texels()),
+            )
+        });
+        let normal_view = normal_map
+            .as_ref()
+            .map(|a| a.create_view(&Default::default()));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("patch"),
             layout: &pipelines.patch_layout,
@@ -379,14 +399,23 @@ impl PatchCache {
                     binding: 2,
                     resource: wgpu::BindingResource::Sampler(&pipelines.atlas_sampler),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(
+                        normal_view.as_ref().unwrap_or(&pipelines.no_atlas),
+                    ),
+                },
             ],
         });
         let id_range = (
             patch.original_ids.iter().copied().min().unwrap_or(0),
             patch.original_ids.iter().copied().max().unwrap_or(0),
         );
-        let bytes =
-            words_len as u64 * 4 + n as u64 * 4 + 512 + image.as_ref().map_or(0, |img| img.bytes());
+        let bytes = words_len as u64 * 4
+            + n as u64 * 4
+            + 512
+            + image.as_ref().map_or(0, |img| img.bytes())
+            + normal_image.as_ref().map_or(0, |img| img.bytes());
         self.live.fetch_add(bytes, Ordering::Relaxed);
         GpuPatch {
             node,
@@ -395,7 +424,10 @@ impl PatchCache {
             layout,
             bind_group,
             buffer,
+            color_atlas: atlas.is_some(),
+            normal_map: normal_map.is_some(),
             _atlas: atlas,
+            _normal_map: normal_map,
             original_ids: patch.original_ids.clone(),
             id_range,
             bytes,

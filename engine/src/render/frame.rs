@@ -12,7 +12,7 @@ use wgpu::util::DeviceExt;
 
 use super::cache::{GpuPatch, node_bytes};
 use super::highlight::{self, Prepared};
-use super::pipeline::{Albedo, Variant};
+use super::pipeline::{Albedo, MainKey, Variant};
 use super::{
     COVERED_BIT, Frame, GPU_TIMEOUT, IdBuffer, NO_ID, NO_NODE, Outputs, RenderError, RenderModel,
     RenderOptions, RenderStats, Renderer, pipeline,
@@ -561,7 +561,7 @@ impl Renderer {
 
 /// Where a patch's colour comes from.
 fn albedo_of(p: &GpuPatch) -> Albedo {
-    if p.layout.uvs != u32::MAX {
+    if p.color_atlas {
         Albedo::Texture
     } else if p.layout.colors != u32::MAX {
         Albedo::Vertex
@@ -594,24 +594,25 @@ fn encode_batch(
         Mode::Buffers => Variant::Buffers,
     };
     // Each patch's pipeline, looked up before the pass records.
-    let chosen: Vec<(Variant, Albedo)> = patches
+    let chosen: Vec<MainKey> = patches
         .iter()
         .enumerate()
         .map(|(i, p)| {
             (
                 variant_of(marked.get(i).copied().unwrap_or(false)),
                 albedo_of(p),
+                p.normal_map,
             )
         })
         .collect();
-    let mut used: Vec<(Variant, Albedo)> = chosen.clone();
-    used.sort_by_key(|&(v, a)| (v as u8, a as u8));
+    let mut used: Vec<MainKey> = chosen.clone();
+    used.sort_by_key(|&(v, a, n)| (v as u8, a as u8, n));
     used.dedup();
-    let made: Vec<((Variant, Albedo), Arc<wgpu::RenderPipeline>)> = used
+    let made: Vec<(MainKey, Arc<wgpu::RenderPipeline>)> = used
         .into_iter()
-        .map(|k| (k, pipelines.main(device, k.0, k.1)))
+        .map(|k| (k, pipelines.main(device, k)))
         .collect();
-    let pipeline_for = |k: (Variant, Albedo)| {
+    let pipeline_for = |k: MainKey| {
         made.iter()
             .find(|(key, _)| *key == k)
             .map(|(_, p)| p.clone())
@@ -676,7 +677,7 @@ fn encode_batch(
         }),
         ..Default::default()
     });
-    let mut current: Option<(Variant, Albedo)> = None;
+    let mut current: Option<MainKey> = None;
     let mut patch_bound = false;
     pass.set_bind_group(0, bind, &[]);
     for (i, p) in patches.iter().enumerate() {
@@ -697,7 +698,7 @@ fn encode_batch(
         let positions = p.buffer.slice(at(l.positions)..at(l.positions) + 12 * n);
         // A pipeline that reads no patch data still needs a group 1: any patch's will do, and
         // setting it once spares the rasteriser a state change per patch.
-        if key.0.reads_patch() || key.1 == Albedo::Texture || !patch_bound {
+        if key.0.reads_patch() || key.1 == Albedo::Texture || key.2 || !patch_bound {
             pass.set_bind_group(1, &p.bind_group, &[]);
             patch_bound = true;
         }

@@ -41,7 +41,7 @@ pub struct Pipelines {
     pub outline: RenderPipeline,
     main_layout: wgpu::PipelineLayout,
     render_module: wgpu::ShaderModule,
-    main: Mutex<HashMap<(Variant, Albedo), Arc<RenderPipeline>>>,
+    main: Mutex<HashMap<MainKey, Arc<RenderPipeline>>>,
 }
 
 /// What a main-pass pipeline writes.
@@ -72,6 +72,10 @@ impl Variant {
         matches!(self, Variant::ImageMarked | Variant::Buffers)
     }
 }
+
+/// A main-pass pipeline: what it writes, where colour comes from, and whether the patch has
+/// a normal map (`NORMAL_MAP` in `render.wgsl`).
+pub type MainKey = (Variant, Albedo, bool);
 
 /// Where a patch's colour comes from (`ALBEDO` in `render.wgsl`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -208,6 +212,7 @@ impl Pipelines {
                     ty: BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                texture(3, wgpu::TextureSampleType::Float { filterable: true }),
             ],
         });
         let atlas_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -281,17 +286,17 @@ impl Pipelines {
         }
     }
 
-    /// The main-pass pipeline of `variant` and `albedo` (made on first use: a software
-    /// adapter compiles each in tens of milliseconds).
-    pub fn main(&self, device: &Device, variant: Variant, albedo: Albedo) -> Arc<RenderPipeline> {
+    /// The main-pass pipeline of `key` (made on first use: a software adapter compiles each in
+    /// tens of milliseconds).
+    pub fn main(&self, device: &Device, key: MainKey) -> Arc<RenderPipeline> {
         let mut cache = self.main.lock().unwrap_or_else(|e| e.into_inner());
         cache
-            .entry((variant, albedo))
-            .or_insert_with(|| Arc::new(self.make_main(device, variant, albedo)))
+            .entry(key)
+            .or_insert_with(|| Arc::new(self.make_main(device, key)))
             .clone()
     }
 
-    fn make_main(&self, device: &Device, variant: Variant, albedo: Albedo) -> RenderPipeline {
+    fn make_main(&self, device: &Device, (variant, albedo, normal_map): MainKey) -> RenderPipeline {
         let targets: &[Option<ColorTargetState>] = match variant {
             Variant::Image => &[target(COLOR_FORMAT)],
             Variant::ImageMarked | Variant::ImageUnmarked => {
@@ -303,7 +308,10 @@ impl Pipelines {
                 target(IDS_FORMAT),
             ],
         };
-        let constants = [("ALBEDO", albedo as u32 as f64)];
+        let constants = [
+            ("ALBEDO", albedo as u32 as f64),
+            ("NORMAL_MAP", f64::from(u8::from(normal_map))),
+        ];
         let options = wgpu::PipelineCompilationOptions {
             constants: &constants,
             ..Default::default()

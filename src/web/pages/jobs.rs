@@ -93,6 +93,8 @@ pub struct BuildFields {
     patch_triangles: String,
     texture_quality: String,
     texture_spread: String,
+    /// The normal-maps checkbox: "on" when ticked.
+    normal_maps: String,
 }
 
 impl BuildFields {
@@ -106,6 +108,11 @@ impl BuildFields {
             patch_triangles: text(options.max_patch_triangles),
             texture_quality: text(options.texture_quality),
             texture_spread: text(options.texture_spread),
+            normal_maps: if options.normal_maps == Some(true) {
+                "on".to_string()
+            } else {
+                String::new()
+            },
         }
     }
 
@@ -116,6 +123,7 @@ impl BuildFields {
             &self.patch_triangles,
             &self.texture_quality,
             &self.texture_spread,
+            &self.normal_maps,
         ]
         .iter()
         .any(|v| !v.trim().is_empty())
@@ -142,6 +150,15 @@ impl BuildFields {
             patch_triangles: number("patch_triangles", &self.patch_triangles)?,
             texture_quality: number("texture_quality", &self.texture_quality)?,
             texture_spread: number("texture_spread", &self.texture_spread)?,
+            normal_maps: match self.normal_maps.trim() {
+                "" => None,
+                "on" | "true" => Some(true),
+                other => {
+                    return Err(ApiError::bad(format!(
+                        "normal_maps must be on or absent, not {other:?}"
+                    )));
+                }
+            },
         })
     }
 }
@@ -225,6 +242,7 @@ async fn receive_form(
             patch_triangles: take("patch_triangles"),
             texture_quality: take("texture_quality"),
             texture_spread: take("texture_spread"),
+            normal_maps: take("normal_maps"),
         },
     };
     match read {

@@ -29,6 +29,8 @@ const FLAG_NORMALS = 2;
 const FLAG_UVS = 4;
 /** Blob header flag (byte 5): an image section (u32 length, then the JPEG) follows byte 12. */
 const BLOB_IMAGE = 1;
+/** Blob header flag (byte 5): a normal-map section (u32 length, then the JPEG) follows. */
+const BLOB_NORMALS = 2;
 const STREAMS = 6;
 const UV_SCALE = 65535;
 const PAYLOAD_HEADER = 52;
@@ -473,10 +475,11 @@ function normalAxis(pos, a, b, c) {
  * @returns {{vertexCount: number, triangleCount: number, shift: number,
  *   gridPositions: Uint32Array, positions: Float32Array, ids: Uint32Array,
  *   indices: Uint32Array, colors: Uint8Array|null, normals: Float32Array|null,
- *   uvs: Float32Array|null, image: Uint8Array|null, border: Uint8Array}}
+ *   uvs: Float32Array|null, image: Uint8Array|null, normalMap: Uint8Array|null,
+ *   border: Uint8Array}}
  *   `uvs`: texture coordinates (u, v per vertex, v = 0 the image's top row) when the payload
  *   has them; `image`: the atlas (JPEG bytes, a copy owning its buffer) when the blob has an
- *   image section.
+ *   image section; `normalMap`: the normal map (JPEG bytes, a copy) when it has one.
  */
 export function decodePatch(blob, grid, deps) {
   if (!(blob instanceof Uint8Array)) throw new DecodeError('blob must be a Uint8Array');
@@ -486,15 +489,21 @@ export function decodePatch(blob, grid, deps) {
   const v3 = blob[3] === 0x33;
   const payloadLen = u32(blob, 8);
   if (payloadLen > MAX_PAYLOAD) throw new DecodeError('patch declares implausible sizes');
-  // Blob flags (byte 5): with an image section, the payload starts after it.
-  let image = null;
+  // Blob flags (byte 5): the image sections (colour atlas, then normal map) come first, the
+  // payload after them.
   let body = 12;
-  if (blob[5] & BLOB_IMAGE) {
-    const imageLen = u32(blob, 12);
-    if (16 + imageLen > blob.length) throw new DecodeError('blob truncated');
-    image = blob.slice(16, 16 + imageLen);
-    body = 16 + imageLen;
-  }
+  const section = (flag) => {
+    if (!(blob[5] & flag)) return null;
+    if (body + 4 > blob.length) throw new DecodeError('blob truncated');
+    const len = u32(blob, body);
+    const end = body + 4 + len;
+    if (end > blob.length) throw new DecodeError('blob truncated');
+    const bytes = blob.slice(body + 4, end);
+    body = end;
+    return bytes;
+  };
+  const image = section(BLOB_IMAGE);
+  const normalMap = section(BLOB_NORMALS);
   let payload;
   if (blob[4] === COMPRESSION_NONE) {
     payload = blob.subarray(body);
@@ -652,6 +661,7 @@ export function decodePatch(blob, grid, deps) {
     normals,
     uvs,
     image,
+    normalMap,
     border,
   };
 }

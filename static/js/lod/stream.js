@@ -36,7 +36,9 @@ const TEXTURE_BYTES_PER_BLOB_BYTE = 10;
  * its coordinates and its texture, width × height × 4 (RGBA8, no mipmaps).
  */
 export function patchBytes(p) {
-  const texture = p.uvs ? p.uvs.byteLength + (p.imageWidth || 0) * (p.imageHeight || 0) * 4 : 0;
+  const texture = p.uvs
+    ? p.uvs.byteLength + ((p.imageWidth || 0) * (p.imageHeight || 0) + (p.normalMapWidth || 0) * (p.normalMapHeight || 0)) * 4
+    : 0;
   return p.positions.byteLength + p.normals.byteLength + (p.colors ? p.colors.byteLength : 0) + p.indices.byteLength + p.ids.byteLength + p.vertexCount * 2 + texture;
 }
 

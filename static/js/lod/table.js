@@ -12,6 +12,7 @@ const HAS_COLORS = 1;
 const HAS_NORMALS = 2;
 /** Every patch carries a texture atlas (an image section and texture coordinates). */
 const HAS_TEXTURE = 4;
+const HAS_NORMAL_MAPS = 8;
 
 let crcTable = null;
 
@@ -121,6 +122,7 @@ export function parseBinary(buffer) {
   t.hasColors = (flags & HAS_COLORS) !== 0;
   t.hasNormals = (flags & HAS_NORMALS) !== 0;
   t.hasTexture = (flags & HAS_TEXTURE) !== 0;
+  t.hasNormalMaps = (flags & HAS_NORMAL_MAPS) !== 0;
   t.levelCount = view.getUint32(28, true);
   t.inputVertices = u64(view, 32);
   t.inputTriangles = u64(view, 40);
@@ -185,6 +187,7 @@ export function fromJson(json) {
   t.hasColors = !!json.has_colors;
   t.hasNormals = !!json.has_normals;
   t.hasTexture = !!json.has_texture;
+  t.hasNormalMaps = !!json.has_normal_maps;
   t.levelCount = json.level_count;
   t.inputVertices = json.input_vertices;
   t.inputTriangles = json.input_triangles;

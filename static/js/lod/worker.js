@@ -18,6 +18,8 @@ function pack(p) {
   // A texture needs both the image and the coordinates (docs/FORMAT.md "Textures").
   const textured = p.image !== null && p.uvs !== null;
   const size = textured ? jpegSize(p.image) : null;
+  const mapped = p.normalMap !== null && p.uvs !== null;
+  const mapSize = mapped ? jpegSize(p.normalMap) : null;
   return {
     vertexCount: p.vertexCount,
     triangleCount: p.triangleCount,
@@ -26,10 +28,13 @@ function pack(p) {
     colors: p.colors,
     ids: p.ids,
     indices,
-    uvs: textured ? p.uvs : null,
+    uvs: textured || mapped ? p.uvs : null,
     image: textured ? p.image : null,
     imageWidth: size ? size.width : 0,
     imageHeight: size ? size.height : 0,
+    normalMap: mapped ? p.normalMap : null,
+    normalMapWidth: mapSize ? mapSize.width : 0,
+    normalMapHeight: mapSize ? mapSize.height : 0,
   };
 }
 
@@ -43,7 +48,9 @@ self.onmessage = async (event) => {
     const transfer = [patch.positions.buffer, patch.normals.buffer, patch.ids.buffer, patch.indices.buffer];
     if (patch.colors) transfer.push(patch.colors.buffer);
     // decodePatch's image is a copy with its own buffer, so this does not move the blob.
-    if (patch.uvs) transfer.push(patch.uvs.buffer, patch.image.buffer);
+    if (patch.uvs) transfer.push(patch.uvs.buffer);
+    if (patch.image) transfer.push(patch.image.buffer);
+    if (patch.normalMap) transfer.push(patch.normalMap.buffer);
     self.postMessage({ id, patch }, transfer);
   } catch (e) {
     self.postMessage({ id, error: String((e && e.message) || e) });

@@ -723,14 +723,19 @@ class Viewer {
   /** Figures for tests and the streaming bench. */
   stats() {
     const r = this.result || { draw: [], triangles: 0, maxError: 0, foveaError: 0, pending: 0, requests: [] };
-    // Drawn patches with an atlas, and those whose atlas is decoded (drawn textured).
-    const textured = r.draw.map((n) => this.view.meshes.get(n)).filter((m) => m && m.geometry.getAttribute('uv'));
+    // Drawn patches with an atlas (a normal map), and those whose atlas (normal map) is
+    // decoded, so drawn with it.
+    const drawnMeshes = r.draw.map((n) => this.view.meshes.get(n)).filter((m) => m);
+    const textured = drawnMeshes.filter((m) => m.userData.textured);
+    const mapped = drawnMeshes.filter((m) => m.userData.mapped);
     return {
       ...this.streamer.stats,
       tableBytes: this.tableBytes,
       drawn: r.draw.length,
       texturesWanted: textured.length,
       texturesReady: textured.filter((m) => m.userData.texture).length,
+      normalMapsWanted: mapped.length,
+      normalMapsReady: mapped.filter((m) => m.userData.normalMap).length,
       triangles: r.triangles,
       maxError: r.maxError,
       maxRatio: r.maxRatio,

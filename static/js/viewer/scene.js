@@ -8,6 +8,8 @@
 // from their atlas instead of their vertex colours, as the server's `albedo` does: the JPEG is
 // decoded to a bitmap here (until then the patch shows its vertex colours) and sampled as it
 // is, RGBA8 without sRGB decoding, bilinear and clamped, like the server's atlas sampler.
+// Coarse patches with a normal map (issue 11 item 4) shade with its texel's mean normal, not
+// normalised (diffuse light is then the texel's mean light), as the server's `facing_normal`.
 
 import * as THREE from 'three';
 import { OutlinePass } from './outline.js';
@@ -49,6 +51,8 @@ uniform vec4 uHoverTint;
 uniform vec4 uSelectTint;
 uniform sampler2D uMap;
 uniform float uTextured;
+uniform sampler2D uNormalMap;
+uniform float uNormalMapped;
 in vec3 vNormal;
 in vec3 vWorld;
 in vec4 vColor;
@@ -162,9 +166,9 @@ bool lumigraph(vec3 P, vec3 V, vec3 N, out vec3 albedo, out vec3 normal, out flo
 #endif
 void main() {
   vec3 v = normalize(cameraPosition - vWorld);
-  vec3 n = vNormal;
+  vec3 n = uNormalMapped > 0.5 ? textureLod(uNormalMap, vUv, 0.0).rgb * 2.0 - 1.0 : vNormal;
   float l = length(n);
-  n = l > 1e-20 ? n / l : v;
+  n = l <= 1e-20 ? v : (uNormalMapped > 0.5 ? n : n / l);
   if (!gl_FrontFacing) n = -n;
   vec3 albedo = uTextured > 0.5 ? textureLod(uMap, vUv, 0.0).rgb : vColor.rgb;
 #ifdef LUMIGRAPH
@@ -257,6 +261,8 @@ export class SceneView {
         uSelectTint: { value: new THREE.Vector4(...SELECT_TINT) },
         uMap: { value: this.noTexture },
         uTextured: { value: 0 },
+        uNormalMap: { value: this.noTexture },
+        uNormalMapped: { value: 0 },
       },
     });
     this.idMaterial = new THREE.ShaderMaterial({
@@ -337,7 +343,7 @@ export class SceneView {
   /**
    * Adds a decoded patch (arrays from the worker) as a hidden mesh. A textured patch (`image`
    * and `uvs`) gets its texture once the image decodes; it is drawn with its vertex colours
-   * until then.
+   * until then. Likewise a normal map (`normalMap`), with its vertex normals until then.
    */
   addPatch(node, patch) {
     const g = new THREE.BufferGeometry();
@@ -345,7 +351,8 @@ export class SceneView {
     g.setAttribute('normal', new THREE.BufferAttribute(patch.normals, 3));
     if (patch.colors) g.setAttribute('aColor', new THREE.BufferAttribute(patch.colors, 4, true));
     const textured = !!(patch.image && patch.uvs);
-    if (textured) g.setAttribute('uv', new THREE.BufferAttribute(patch.uvs, 2));
+    const mapped = !!(patch.normalMap && patch.uvs);
+    if (textured || mapped) g.setAttribute('uv', new THREE.BufferAttribute(patch.uvs, 2));
     const marks = new THREE.BufferAttribute(new Uint8Array(patch.vertexCount * 2), 2, false);
     marks.setUsage(THREE.DynamicDrawUsage);
     g.setAttribute('aMark', marks);
@@ -355,7 +362,7 @@ export class SceneView {
     const mesh = new THREE.Mesh(g, this.material);
     mesh.matrixAutoUpdate = false;
     mesh.visible = false;
-    mesh.userData = { node, ids: patch.ids, vertexCount: patch.vertexCount, texture: null };
+    mesh.userData = { node, ids: patch.ids, vertexCount: patch.vertexCount, textured, mapped, texture: null, normalMap: null };
     const id = node + 1;
     mesh.onBeforeRender = (_r, _s, _c, _g, material) => {
       if (material === this.material) {
@@ -374,6 +381,13 @@ export class SceneView {
           u.uTextured.value = on;
           material.uniformsNeedUpdate = true;
         }
+        const nm = mesh.userData.normalMap;
+        const nmOn = nm ? 1 : 0;
+        if (u.uNormalMap.value !== (nm || this.noTexture) || u.uNormalMapped.value !== nmOn) {
+          u.uNormalMap.value = nm || this.noTexture;
+          u.uNormalMapped.value = nmOn;
+          material.uniformsNeedUpdate = true;
+        }
         return;
       }
       if (material !== this.idMaterial) return;
@@ -382,12 +396,16 @@ export class SceneView {
     };
     this.scene.add(mesh);
     this.meshes.set(node, mesh);
-    if (textured) this.loadTexture(node, mesh, patch.image);
+    if (textured) this.loadTexture(node, mesh, patch.image, 'texture');
+    if (mapped) this.loadTexture(node, mesh, patch.normalMap, 'normalMap');
     return mesh;
   }
 
-  /** Decodes a patch's atlas (JPEG bytes) and gives it to its mesh, if still resident. */
-  async loadTexture(node, mesh, bytes) {
+  /**
+   * Decodes a patch's atlas or normal map (JPEG bytes, `key` 'texture' or 'normalMap') and
+   * gives it to its mesh, if still resident.
+   */
+  async loadTexture(node, mesh, bytes, key) {
     let bitmap;
     try {
       // The texels as stored: no colour management (sRGB bytes, like vertex colours).
@@ -401,7 +419,7 @@ export class SceneView {
       bitmap.close();
       return;
     }
-    mesh.userData.texture = atlasTexture(bitmap);
+    mesh.userData[key] = atlasTexture(bitmap);
     this.onChange();
   }
 
@@ -410,19 +428,20 @@ export class SceneView {
     if (!mesh) return;
     this.scene.remove(mesh);
     mesh.geometry.dispose();
-    const tex = mesh.userData.texture;
-    if (tex) {
+    for (const [key, uniform, flag] of [['texture', 'uMap', 'uTextured'], ['normalMap', 'uNormalMap', 'uNormalMapped']]) {
+      const tex = mesh.userData[key];
+      if (!tex) continue;
       const u = this.material.uniforms;
-      if (u.uMap.value === tex) {
+      if (u[uniform].value === tex) {
         // Never bind a disposed texture again (three would upload it anew).
-        u.uMap.value = this.noTexture;
-        u.uTextured.value = 0;
+        u[uniform].value = this.noTexture;
+        u[flag].value = 0;
         this.material.uniformsNeedUpdate = true;
       }
       tex.dispose();
       // Never uploaded (evicted before it was drawn): its bitmap is still open.
       if (tex.image && tex.image.width > 0 && typeof tex.image.close === 'function') tex.image.close();
-      mesh.userData.texture = null;
+      mesh.userData[key] = null;
     }
     this.meshes.delete(node);
   }

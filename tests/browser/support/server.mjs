@@ -101,9 +101,9 @@ export async function startServer({ env = {} } = {}) {
 }
 
 /** Uploads a scan through `POST /api/v1/models/upload` and waits for its build; returns the model. */
-export async function importScan(api, path, title, timeoutMs = 600_000) {
+export async function importScan(api, path, title, timeoutMs = 600_000, build = {}) {
   const bytes = readFileSync(path);
-  const q = new URLSearchParams({ title, filename: basename(path) });
+  const q = new URLSearchParams({ title, filename: basename(path), ...build });
   const res = await api.request('POST', `/api/v1/models/upload?${q}`, { body: bytes, headers: { 'Content-Type': 'application/octet-stream' }, raw: true });
   const text = await res.text();
   if (res.status !== 202) throw new Error(`upload: HTTP ${res.status}: ${text}`);
