@@ -297,6 +297,26 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
             texels as f64 / 1e6,
             jpeg as f64 / texels.max(1) as f64,
         );
+        let per_texel = |b: &TextureBytes| b.jpeg_bytes as f64 / b.covered_texels.max(1) as f64;
+        let coarse = TextureBytes {
+            fragments: all.fragments - t.leaves.fragments,
+            covered_texels: all.covered_texels - t.leaves.covered_texels,
+            jpeg_bytes: all.jpeg_bytes - t.leaves.jpeg_bytes,
+            header_bytes: all.header_bytes - t.leaves.header_bytes,
+            ..TextureBytes::default()
+        };
+        for (name, b) in [("leaves", &t.leaves), ("coarse levels", &coarse)] {
+            println!(
+                "    {name}: {} fragments, {:.2} MB for {:.1} M covered texels = {:.3} bytes a \
+                 texel ({:.3} without the JPEG headers, {:.1}% of the bytes)",
+                b.fragments,
+                b.jpeg_bytes as f64 / 1e6,
+                b.covered_texels as f64 / 1e6,
+                per_texel(b),
+                (b.jpeg_bytes - b.header_bytes) as f64 / b.covered_texels.max(1) as f64,
+                100.0 * b.header_bytes as f64 / b.jpeg_bytes.max(1) as f64,
+            );
+        }
     }
     Ok(())
 }

@@ -197,14 +197,19 @@ fn fragment_quality_follows_feature_density() {
         uf.jpeg_bytes + up.jpeg_bytes,
         ff.jpeg_bytes + fp.jpeg_bytes
     );
-    // The JPEGs went into the blobs: every patch decodes with its atlas.
+    // The JPEGs went into the blobs (as the report counts them: without the standard Huffman
+    // tables, which decoding puts back): every patch decodes with its atlas.
     let lod = LodFile::open(&out).expect("open");
     let mut bytes = 0u64;
     for node in 0..lod.nodes().len() as u32 {
         let p = lod.patch(node).expect("decodes");
         let img = p.image.as_deref().expect("every patch has an atlas");
         mesh::Texture::decode(img).expect("the atlas is an image");
-        bytes += img.len() as u64;
+        let blob = lod.blob(node).expect("a blob");
+        assert!(lod::codec::images_without_tables(blob));
+        let stored = lod::codec::blob_bytes(blob).expect("frames").0.image;
+        assert_eq!(stored + lod::jpegtables::STANDARD_DHT.len(), img.len());
+        bytes += stored as u64;
     }
     assert_eq!(bytes, ff.jpeg_bytes + fp.jpeg_bytes);
     let _ = std::fs::remove_dir_all(&dir);
@@ -331,7 +336,9 @@ fn bali_mask_close_up_at_one_pixel_matches_the_source_texture() {
         let p = lod_file.patch(node).expect("decodes");
         let img = p.image.expect("atlas");
         let t = mesh::Texture::decode(&img).expect("jpeg");
-        image_bytes += img.len() as u64;
+        // As stored (without the standard Huffman tables, which decoding puts back).
+        let blob = lod_file.blob(node).expect("a blob");
+        image_bytes += lod::codec::blob_bytes(blob).expect("frames").0.image as u64;
         texels += t.width() as u64 * t.height() as u64;
     }
     let source_jpeg = std::fs::metadata(path.with_file_name("Image_0.jpg"))

@@ -11,7 +11,7 @@ import { existsSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
-import { decodePatch, decodeYCoCg, DecodeError, jpegSize, predict, walk } from '../../static/js/lod/decode.js';
+import { decodePatch, decodeYCoCg, DecodeError, jpegSize, predict, STANDARD_DHT, walk } from '../../static/js/lod/decode.js';
 import { crc32, parseBinary } from '../../static/js/lod/table.js';
 import { patchBytes } from '../../static/js/lod/stream.js';
 import { SHARED_MESHES, decoderDeps, importStatic, meshwiki, sampleMesh } from './support/env.mjs';
@@ -349,6 +349,20 @@ test('textured blobs: image section, texture coordinates and wedge vertices (han
   assert.deepEqual(Array.from(alone.normalMap), Array.from(normalMap));
   assert.deepEqual(geometry(alone), geometry(both));
   assert.equal(p.normalMap, null);
+  // Sections stored without their Huffman tables (blob flag bit 2) get the standard ones back,
+  // right before the scan header, in both images.
+  const sof = [0xff, 0xc0, 0, 11, 8, 0, 16, 0, 32, 1, 1, 0x11, 0];
+  const sos = [0xff, 0xda, 0, 8, 1, 1, 0, 0, 63, 0, 0x12, 0x34, 0xff, 0xd9];
+  const stripped = Uint8Array.from([0xff, 0xd8, ...sof, ...sos]);
+  const restored = Uint8Array.from([0xff, 0xd8, ...sof, ...STANDARD_DHT, ...sos]);
+  const tablesOff = encodeSquare(encoder, deps.meshopt, { texture: true, image: stripped, normalMap: stripped }).blob;
+  tablesOff[5] |= 4;
+  const whole = decodePatch(tablesOff, grid, deps);
+  assert.deepEqual(Array.from(whole.image), Array.from(restored));
+  assert.deepEqual(Array.from(whole.normalMap), Array.from(restored));
+  assert.deepEqual(jpegSize(whole.image), { width: 32, height: 16 });
+  // Annex K.3: the DC luminance table's code length counts.
+  assert.deepEqual(Array.from(STANDARD_DHT.subarray(5, 21)), [0, 1, 5, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0]);
   // A normal map declared longer than the blob.
   const bad = encodeSquare(encoder, deps.meshopt, { texture: true, image: null, normalMap }).blob;
   bad.set(u32le(bad.length), 12);

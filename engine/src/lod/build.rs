@@ -157,6 +157,9 @@ pub struct TextureReport {
     pub featured: TextureBytes,
     /// The other fragments.
     pub plain: TextureBytes,
+    /// The leaves' fragments (of either class): the scan's textures at their own resolution,
+    /// where the coarse levels' are resampled from them.
+    pub leaves: TextureBytes,
 }
 
 /// Bytes and (with [`BuildOptions::measure_textures`]) JPEG error of a class of fragments.
@@ -166,6 +169,9 @@ pub struct TextureBytes {
     /// Texels inside the atlases' triangles.
     pub covered_texels: u64,
     pub jpeg_bytes: u64,
+    /// Of `jpeg_bytes`, the JPEGs' headers: everything before the entropy-coded data (markers,
+    /// quantisation and Huffman tables, frame and scan headers).
+    pub header_bytes: u64,
     /// Squared error of the decoded JPEGs' covered texels (8-bit RGB) against the raw atlas.
     pub squared_error: f64,
     /// Channel samples measured (three a covered texel; 0 when not measured).
@@ -196,6 +202,7 @@ impl TextureBytes {
             fragments: self.fragments + o.fragments,
             covered_texels: self.covered_texels + o.covered_texels,
             jpeg_bytes: self.jpeg_bytes + o.jpeg_bytes,
+            header_bytes: self.header_bytes + o.header_bytes,
             squared_error: self.squared_error + o.squared_error,
             samples: self.samples + o.samples,
             ssim_sum: self.ssim_sum + o.ssim_sum,
@@ -1039,17 +1046,29 @@ impl<'a> Builder<'a> {
                         .map(|n| atlas::encode_normal_jpeg(n, NORMAL_MAP_QUALITY));
                     let blob = codec::with_images(&blob, color.as_deref(), normals.as_deref())
                         .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+                    // Bytes as stored: without the Huffman tables where the blob says so.
+                    let saved = if codec::images_without_tables(&blob) {
+                        super::jpegtables::STANDARD_DHT.len() as u64
+                    } else {
+                        0
+                    };
                     let measured = match (&color, &atlas.image) {
-                        (Some(jpeg), Some(image)) => Some(measure_atlas(
-                            image,
-                            &atlas.uvs,
-                            jpeg,
-                            n.features.covered_texels,
-                            this.options.measure_textures,
-                        )?),
+                        (Some(jpeg), Some(image)) => {
+                            let mut m = measure_atlas(
+                                image,
+                                &atlas.uvs,
+                                jpeg,
+                                n.features.covered_texels,
+                                this.options.measure_textures,
+                            )?;
+                            m.jpeg_bytes -= saved;
+                            m.header_bytes -= saved;
+                            Some(m)
+                        }
                         _ => None,
                     };
-                    Ok((blob, measured, normals.map(|n| n.len())))
+                    let normal_bytes = normals.map(|n| n.len() - saved as usize);
+                    Ok((blob, measured, normal_bytes))
                 })
                 .collect();
             for (&i, result) in chunk.iter().zip(done) {
@@ -1069,6 +1088,9 @@ impl<'a> Builder<'a> {
                         &mut report.plain
                     };
                     *class = class.plus(&m);
+                    if self.nodes[i].level == 0 {
+                        report.leaves = report.leaves.plus(&m);
+                    }
                     quality_sum += u64::from(q);
                     q_min = q_min.min(q);
                     q_max = q_max.max(q);
@@ -1206,6 +1228,7 @@ fn measure_atlas(
         fragments: 1,
         covered_texels,
         jpeg_bytes: jpeg.len() as u64,
+        header_bytes: jpeg_header_len(jpeg) as u64,
         ..TextureBytes::default()
     };
     if measure {
@@ -1231,6 +1254,24 @@ fn measure_atlas(
         }
     }
     Ok(bytes)
+}
+
+/// Bytes of a JPEG before its entropy-coded data: up to the end of its (first) scan header,
+/// the whole stream where it has none.
+fn jpeg_header_len(jpeg: &[u8]) -> usize {
+    let mut at = 2;
+    while at + 4 <= jpeg.len() {
+        if jpeg[at] != 0xFF {
+            break;
+        }
+        let marker = jpeg[at + 1];
+        let len = usize::from(u16::from_be_bytes([jpeg[at + 2], jpeg[at + 3]]));
+        at += 2 + len;
+        if marker == 0xDA {
+            return at.min(jpeg.len());
+        }
+    }
+    jpeg.len()
 }
 
 /// A leaf's atlas, cut from the scan's textures at their own resolution.

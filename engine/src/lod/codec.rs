@@ -38,6 +38,7 @@ use meshopt::{
 use rustc_hash::FxHashMap as HashMap;
 
 use super::frontcoder::{self, Prediction};
+use super::jpegtables;
 use super::parallelogram::{Parallelograms, predict};
 use super::patch::{EdgeUses, edge_ends};
 use super::rangecoder::{self, Channel};
@@ -57,6 +58,9 @@ const FLAG_UVS: u32 = 4;
 const BLOB_IMAGE: u8 = 1;
 /// Blob header flag (byte 5): a normal-map section follows (after the image section, if any).
 const BLOB_NORMALS: u8 = 2;
+/// Blob header flag (byte 5): the sections' JPEGs are stored without their Huffman tables,
+/// which are the standard ones ([`super::jpegtables`]).
+const BLOB_STANDARD_HUFFMAN: u8 = 4;
 const PAYLOAD_HEADER: usize = 52;
 /// Octahedral normal quantisation: components in `-OCT_SCALE..=OCT_SCALE` (8 bits).
 pub const OCT_SCALE: f64 = 127.0;
@@ -853,12 +857,25 @@ fn encode_split(
     (blob, used)
 }
 
-/// Appends the image sections to a blob header (12 bytes, flags at byte 5 set here). An
-/// image is a JPEG of at most [`super::atlas::MAX_SIDE`]² texels: far below 4 GiB.
+/// Appends the image sections to a blob header (12 bytes, flags at byte 5 set here): without
+/// their Huffman tables where every image present has the standard ones
+/// ([`super::jpegtables`]), whole otherwise. An image is a JPEG of at most
+/// [`super::atlas::MAX_SIDE`]² texels: far below 4 GiB.
 fn push_sections(blob: &mut Vec<u8>, image: Option<&[u8]>, normals: Option<&[u8]>) {
-    blob[5] = 0;
-    for (flag, section) in [(BLOB_IMAGE, image), (BLOB_NORMALS, normals)] {
-        if let Some(bytes) = section {
+    let present = [image, normals];
+    let stripped = present.map(|i| i.and_then(jpegtables::strip_standard_huffman));
+    let strip = present.iter().any(Option::is_some)
+        && present
+            .iter()
+            .zip(&stripped)
+            .all(|(p, s)| p.is_none() || s.is_some());
+    blob[5] = if strip { BLOB_STANDARD_HUFFMAN } else { 0 };
+    for (k, flag) in [BLOB_IMAGE, BLOB_NORMALS].into_iter().enumerate() {
+        if let Some(whole) = present[k] {
+            let bytes = match &stripped[k] {
+                Some(s) if strip => &s[..],
+                _ => whole,
+            };
             blob[5] |= flag;
             blob.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
             blob.extend_from_slice(bytes);
@@ -885,6 +902,11 @@ fn sections(blob: &[u8]) -> Result<Sections<'_>, CodecError> {
     let image = section(BLOB_IMAGE)?;
     let normals = section(BLOB_NORMALS)?;
     Ok((image, normals, at))
+}
+
+/// Whether a blob's image sections are stored without their (standard) Huffman tables.
+pub fn images_without_tables(blob: &[u8]) -> bool {
+    blob.get(5).is_some_and(|f| f & BLOB_STANDARD_HUFFMAN != 0)
 }
 
 /// `blob` with its image sections holding `image` (the colour atlas) and `normals` (the normal
@@ -1065,8 +1087,16 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         payload,
         ..
     } = unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
-    let image = image.map(<[u8]>::to_vec);
-    let normal_map = normal_map.map(<[u8]>::to_vec);
+    // Images stored without their (standard) Huffman tables get them back.
+    let whole = |i: &[u8]| {
+        if blob[5] & BLOB_STANDARD_HUFFMAN != 0 {
+            jpegtables::with_standard_huffman(i)
+        } else {
+            i.to_vec()
+        }
+    };
+    let image = image.map(whole);
+    let normal_map = normal_map.map(whole);
     let vertex_count = u32_at(&payload, 0)?;
     let triangle_count = u32_at(&payload, 4)?;
     let flags = u32_at(&payload, 8)?;
@@ -1441,6 +1471,28 @@ mod tests {
             plain.extend_from_slice(&empty[16..]);
             plain
         });
+        // Real JPEGs (the standard Huffman tables) are stored without their tables and decode
+        // whole, byte for byte.
+        let texture = crate::mesh::Texture::from_texels(16, 8, vec![[200, 30, 90, 255]; 128])
+            .expect("an image");
+        let jpeg = super::super::atlas::encode_jpeg(&texture, 85);
+        let normal_jpeg = super::super::atlas::encode_normal_jpeg(&texture, 90);
+        let real = with_images(&empty, Some(&jpeg), Some(&normal_jpeg)).expect("a blob");
+        assert_eq!(real[5], BLOB_IMAGE | BLOB_NORMALS | BLOB_STANDARD_HUFFMAN);
+        let (bytes, _) = blob_bytes(&real).expect("frames");
+        let tables = jpegtables::STANDARD_DHT.len();
+        assert_eq!(bytes.image + tables, jpeg.len());
+        assert_eq!(bytes.normal_map + tables, normal_jpeg.len());
+        let r = decode(&real, &grid).expect("decodes");
+        assert_eq!(r.image.as_deref(), Some(&jpeg[..]));
+        assert_eq!(r.normal_map.as_deref(), Some(&normal_jpeg[..]));
+        // Beside an image that is not such a JPEG, both are stored whole.
+        let mixed = with_images(&empty, Some(&jpeg), Some(&[7, 7])).expect("a blob");
+        assert_eq!(mixed[5], BLOB_IMAGE | BLOB_NORMALS);
+        assert_eq!(
+            decode(&mixed, &grid).expect("decodes").image.as_deref(),
+            Some(&jpeg[..])
+        );
         // A declared normal map longer than the blob is refused.
         let mut bad = alone.clone();
         bad[12..16].copy_from_slice(&(alone.len() as u32).to_le_bytes());

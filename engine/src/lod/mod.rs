@@ -17,6 +17,7 @@ pub mod frontcoder;
 mod grouping;
 pub mod hausdorff;
 mod ingest;
+pub mod jpegtables;
 pub mod nearest;
 pub mod parallelogram;
 pub mod partition;

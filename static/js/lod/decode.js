@@ -31,6 +31,46 @@ const FLAG_UVS = 4;
 const BLOB_IMAGE = 1;
 /** Blob header flag (byte 5): a normal-map section (u32 length, then the JPEG) follows. */
 const BLOB_NORMALS = 2;
+/** Blob header flag (byte 5): the sections' JPEGs omit their (standard) Huffman tables. */
+const BLOB_STANDARD_HUFFMAN = 4;
+
+/**
+ * The standard Huffman tables of ITU-T T.81 Annex K.3 as four DHT segments (DC and AC
+ * luminance, DC and AC chrominance), exactly as the engine's encoder writes them
+ * (engine/src/lod/jpegtables.rs `STANDARD_DHT`, docs/FORMAT.md "Patch blob").
+ */
+export const STANDARD_DHT = Uint8Array.from(
+  ('ffc4001f0000010501010101010100000000000000000102030405060708090a0bffc400b51000020103030204030505' +
+  '04040000017d01020300041105122131410613516107227114328191a1082342b1c11552d1f02433627282090a161718' +
+  '191a25262728292a3435363738393a434445464748494a535455565758595a636465666768696a737475767778797a83' +
+  '8485868788898a92939495969798999aa2a3a4a5a6a7a8a9aab2b3b4b5b6b7b8b9bac2c3c4c5c6c7c8c9cad2d3d4d5d6' +
+  'd7d8d9dae1e2e3e4e5e6e7e8e9eaf1f2f3f4f5f6f7f8f9faffc4001f0100030101010101010101010000000000000102' +
+  '030405060708090a0bffc400b51100020102040403040705040400010277000102031104052131061241510761711322' +
+  '328108144291a1b1c109233352f0156272d10a162434e125f11718191a262728292a35363738393a434445464748494a' +
+  '535455565758595a636465666768696a737475767778797a82838485868788898a92939495969798999aa2a3a4a5a6a7' +
+  'a8a9aab2b3b4b5b6b7b8b9bac2c3c4c5c6c7c8c9cad2d3d4d5d6d7d8d9dae2e3e4e5e6e7e8e9eaf2f3f4f5f6f7f8f9fa').match(/../g).map((b) => parseInt(b, 16)),
+);
+
+/**
+ * A JPEG stored without its Huffman tables made whole: STANDARD_DHT right before its first
+ * SOS marker (the bytes as they are where no SOS is found: the image decoder then refuses
+ * them as it would have).
+ */
+export function withStandardHuffman(jpeg) {
+  if (jpeg.length < 2 || jpeg[0] !== 0xff || jpeg[1] !== 0xd8) return jpeg;
+  let at = 2;
+  while (at + 4 <= jpeg.length && jpeg[at] === 0xff) {
+    if (jpeg[at + 1] === 0xda) {
+      const out = new Uint8Array(jpeg.length + STANDARD_DHT.length);
+      out.set(jpeg.subarray(0, at));
+      out.set(STANDARD_DHT, at);
+      out.set(jpeg.subarray(at), at + STANDARD_DHT.length);
+      return out;
+    }
+    at += 2 + ((jpeg[at + 2] << 8) | jpeg[at + 3]);
+  }
+  return jpeg;
+}
 const STREAMS = 6;
 const UV_SCALE = 65535;
 const PAYLOAD_HEADER = 52;
@@ -502,8 +542,9 @@ export function decodePatch(blob, grid, deps) {
     body = end;
     return bytes;
   };
-  const image = section(BLOB_IMAGE);
-  const normalMap = section(BLOB_NORMALS);
+  const whole = (bytes) => (bytes && blob[5] & BLOB_STANDARD_HUFFMAN ? withStandardHuffman(bytes) : bytes);
+  const image = whole(section(BLOB_IMAGE));
+  const normalMap = whole(section(BLOB_NORMALS));
   let payload;
   if (blob[4] === COMPRESSION_NONE) {
     payload = blob.subarray(body);
