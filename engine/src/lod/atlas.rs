@@ -23,9 +23,14 @@
 //!    centroid; [`GUTTER`] dilation passes then fill the gutter from the chart itself, so
 //!    bilinear filtering never mixes in another chart, and the rest is filled by push-pull,
 //!    a smooth continuation of the charts (cheap for JPEG: no step along every chart).
+//! 4. **Normal maps** (issue 11 item 4, the progressive-transmission paper; a build option):
+//!    the same bake, in the same query, gives every coarse patch's texel the mean normal of
+//!    the finer surface ([`FinerPatch`]: its normal map, or a leaf's vertex normals, never
+//!    extrapolated, [`Resampled`]'s `reach`), not normalised ([`PatchTexture::normals`]).
 //!
 //! Texel size follows the patch's error (`build.rs`): a patch is drawn while its error
-//! projects to at most a pixel, so texels of that size keep a texel per pixel or better.
+//! projects to at most a pixel, so texels of that size keep a texel per pixel or better
+//! (normal maps: also a few texels a triangle edge, `BuildOptions::normal_map_density`).
 
 use super::nearest::{Hit, Nearest};
 use crate::mesh::{SourceTexture, Texture, TexturedFace, Wrap, encode_rgba, srgb_to_linear};
