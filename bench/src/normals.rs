@@ -15,6 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::render::TempDir;
 use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
 use glam::Vec3;
@@ -57,15 +58,6 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
-/// A scratch directory removed on drop.
-struct TempDir(PathBuf);
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 fn build(scan: &str, out: &Path, density: Option<f32>) -> Result<lod::BuildReport> {
     let options = BuildOptions {
         normal_maps: density.is_some(),
@@ -99,13 +91,7 @@ fn build(scan: &str, out: &Path, density: Option<f32>) -> Result<lod::BuildRepor
 
 /// An orbit that zooms from 2.2 to 0.6 model radii, at 30° over the model's widest plane.
 fn cameras(model: &RenderModel, views: usize, width: u32, height: u32) -> Vec<Camera> {
-    let h = model.lod().header();
-    let ext: Vec<f32> = (0..3)
-        .map(|k| (h.bbox_max[k] - h.bbox_min[k]).abs())
-        .collect();
-    let thin = (0..3)
-        .min_by(|&a, &b| ext[a].total_cmp(&ext[b]))
-        .unwrap_or(2);
+    let thin = model.thin_axis();
     let base = Vec3::AXES[thin];
     let up = Vec3::AXES[if thin == 1 { 2 } else { 1 }];
     let centre = model.center();

@@ -53,13 +53,7 @@ pub fn run(args: &Args) -> Result<()> {
     .context("building the test relief")?;
     let model = RenderModel::open(&out).context("opening the test relief")?;
     // Look along the relief's thin axis (it faces that way), from 2.5 radii.
-    let h = model.lod().header();
-    let ext: Vec<f32> = (0..3)
-        .map(|k| (h.bbox_max[k] - h.bbox_min[k]).abs())
-        .collect();
-    let thin = (0..3)
-        .min_by(|&a, &b| ext[a].total_cmp(&ext[b]))
-        .unwrap_or(2);
+    let thin = model.thin_axis();
     let axis = glam::Vec3::AXES[thin];
     let camera = Camera {
         eye: model.center() + axis * model.radius().max(1e-6) * 2.5,

@@ -39,7 +39,7 @@ const FOVY: f32 = 45.0;
 const BUFFER_FRAMES: usize = 10;
 
 /// Temporary directory removed on drop.
-struct TempDir(PathBuf);
+pub(crate) struct TempDir(pub(crate) PathBuf);
 
 impl Drop for TempDir {
     fn drop(&mut self) {
@@ -148,15 +148,10 @@ fn open_model(model: &Path, temp: &mut Option<TempDir>) -> Result<(RenderModel, 
 /// The camera path: an orbit that zooms from 2.4 to 0.5 model radii and back. Flat models
 /// (reliefs) are orbited around their thin axis at a 25° tilt, others around +Y at 15°.
 fn camera_path(model: &RenderModel) -> Vec<Camera> {
-    let h = model.lod().header();
-    let ext: Vec<f32> = (0..3)
-        .map(|k| (h.bbox_max[k] - h.bbox_min[k]).abs())
-        .collect();
+    let ext = model.extents();
     let centre = model.center();
     let radius = model.radius().max(1e-6);
-    let thin = (0..3)
-        .min_by(|&a, &b| ext[a].total_cmp(&ext[b]))
-        .unwrap_or(2);
+    let thin = model.thin_axis();
     let largest = ext.iter().copied().fold(0.0, f32::max);
     let flat = ext[thin] < 0.35 * largest;
     let axis = |k: usize| glam::Vec3::AXES[k];

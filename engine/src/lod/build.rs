@@ -433,8 +433,6 @@ struct Builder<'a> {
     /// Every patch's atlas, for the level above to resample (textured scans).
     atlases: ScratchFile,
     textured: bool,
-    /// Whether coarse patches get normal maps ([`BuildOptions::normal_maps`]).
-    normal_maps: bool,
     normal_map_bytes: NormalMapBytes,
     /// The scratch directory.
     scratch: PathBuf,
@@ -471,7 +469,6 @@ impl<'a> Builder<'a> {
             blobs: ScratchFile::create(&scratch.join("patches.blobs"))?,
             atlases: ScratchFile::create(&scratch.join("patches.atlases"))?,
             textured: ingested.face_uvs.is_some(),
-            normal_maps: options.normal_maps,
             normal_map_bytes: NormalMapBytes::default(),
             scratch: scratch.to_path_buf(),
             grid,
@@ -499,7 +496,7 @@ impl<'a> Builder<'a> {
             .push(("levels".to_string(), t.elapsed().as_secs_f64()));
 
         // 5. Atlases (textured scans) and write.
-        let textures = if builder.textured || builder.normal_maps {
+        let textures = if builder.textured || options.normal_maps {
             let t = Instant::now();
             let report = builder.place_atlases()?;
             builder
@@ -853,7 +850,7 @@ impl<'a> Builder<'a> {
                     }
                     let maps = Maps {
                         color: this.textured,
-                        normals: this.normal_maps,
+                        normals: this.options.normal_maps,
                     };
                     let member_atlases = if maps.color || maps.normals {
                         members
@@ -1228,7 +1225,7 @@ fn measure_atlas(
         fragments: 1,
         covered_texels,
         jpeg_bytes: jpeg.len() as u64,
-        header_bytes: jpeg_header_len(jpeg) as u64,
+        header_bytes: super::jpegtables::header_len(jpeg) as u64,
         ..TextureBytes::default()
     };
     if measure {
@@ -1254,24 +1251,6 @@ fn measure_atlas(
         }
     }
     Ok(bytes)
-}
-
-/// Bytes of a JPEG before its entropy-coded data: up to the end of its (first) scan header,
-/// the whole stream where it has none.
-fn jpeg_header_len(jpeg: &[u8]) -> usize {
-    let mut at = 2;
-    while at + 4 <= jpeg.len() {
-        if jpeg[at] != 0xFF {
-            break;
-        }
-        let marker = jpeg[at + 1];
-        let len = usize::from(u16::from_be_bytes([jpeg[at + 2], jpeg[at + 3]]));
-        at += 2 + len;
-        if marker == 0xDA {
-            return at.min(jpeg.len());
-        }
-    }
-    jpeg.len()
 }
 
 /// A leaf's atlas, cut from the scan's textures at their own resolution.

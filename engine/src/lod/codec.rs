@@ -1089,7 +1089,7 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     } = unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
     // Images stored without their (standard) Huffman tables get them back.
     let whole = |i: &[u8]| {
-        if blob[5] & BLOB_STANDARD_HUFFMAN != 0 {
+        if images_without_tables(blob) {
             jpegtables::with_standard_huffman(i)
         } else {
             i.to_vec()

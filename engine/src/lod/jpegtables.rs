@@ -58,6 +58,17 @@ pub fn strip_standard_huffman(jpeg: &[u8]) -> Option<Vec<u8>> {
     Some([&jpeg[..start], &jpeg[sos..]].concat())
 }
 
+/// Bytes of a JPEG before its entropy-coded data: up to the end of its first scan header (the
+/// whole stream where it has none).
+pub fn header_len(jpeg: &[u8]) -> usize {
+    sos_offset(jpeg)
+        .and_then(|at| {
+            let len = usize::from(u16::from_be_bytes([*jpeg.get(at + 2)?, *jpeg.get(at + 3)?]));
+            Some((at + 2 + len).min(jpeg.len()))
+        })
+        .unwrap_or(jpeg.len())
+}
+
 /// Where the first SOS marker of a JPEG starts (walking its marker segments from SOI).
 fn sos_offset(jpeg: &[u8]) -> Option<usize> {
     if jpeg.get(..2) != Some(&[0xFF, 0xD8][..]) {
@@ -147,6 +158,10 @@ mod tests {
             assert_eq!(stripped.len() + STANDARD_DHT.len(), jpeg.len());
             assert_eq!(with_standard_huffman(&stripped), jpeg);
             assert!(Texture::decode(&with_standard_huffman(&stripped)).is_ok());
+            // The header ends where the scan's data starts.
+            let header = header_len(&jpeg);
+            assert!(header > STANDARD_DHT.len() && header < jpeg.len());
+            assert_eq!(header_len(&stripped), header - STANDARD_DHT.len());
             // Stripped twice: no tables left to strip.
             assert!(strip_standard_huffman(&stripped).is_none());
         }

@@ -359,7 +359,7 @@ impl PatchCache {
             }
         }
         buffer.unmap();
-        let atlas = image.as_ref().map(|img| {
+        let gpu = |img: &Texture| {
             atlas_texture(
                 device,
                 queue,
@@ -367,20 +367,11 @@ impl PatchCache {
                 img.height(),
                 bytemuck::cast_slice(img.texels()),
             )
-        });
-        let atlas_view = atlas.as_ref().map(|a| a.create_view(&Default::default()));
-        let normal_map = normal_image.as_ref().map(|img| {
-            atlas_texture(
-                device,
-                queue,
-                img.width(),
-                img.height(),
-                bytemuck::cast_slice(img.texels()),
-            )
-        });
-        let normal_view = normal_map
-            .as_ref()
-            .map(|a| a.create_view(&Default::default()));
+        };
+        let atlas = image.as_ref().map(gpu);
+        let normal_map = normal_image.as_ref().map(gpu);
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let (atlas_view, normal_view) = (atlas.as_ref().map(view), normal_map.as_ref().map(view));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("patch"),
             layout: &pipelines.patch_layout,

@@ -156,6 +156,21 @@ impl RenderModel {
         self.radius
     }
 
+    /// Side lengths of the model's bounding box along x, y and z.
+    pub fn extents(&self) -> [f32; 3] {
+        let h = self.lod.header();
+        [0, 1, 2].map(|k| (h.bbox_max[k] - h.bbox_min[k]).abs())
+    }
+
+    /// The axis (0 = x, 1 = y, 2 = z) along which the bounding box is thinnest: the way a
+    /// relief faces.
+    pub fn thin_axis(&self) -> usize {
+        let ext = self.extents();
+        (0..3)
+            .min_by(|&a, &b| ext[a].total_cmp(&ext[b]))
+            .unwrap_or(2)
+    }
+
     /// The three original vertex ids of triangle `triangle` of patch `node` (as in the id
     /// buffer), decoded from the file.
     pub fn triangle_ids(&self, node: u32, triangle: u32) -> Result<[u32; 3], RenderError> {
