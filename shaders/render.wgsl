@@ -21,6 +21,10 @@
 // by the pipeline of its own, so no shader carries the others' varyings, loads or branches.
 // `NORMAL_MAP` (a pipeline constant): the patch has a normal map (coarse patches, issue 11
 // item 4), whose object-space normal of the finest surface replaces the interpolated one.
+//
+// Light is computed per vertex (`vertex_light`), per pixel only under a normal map. The
+// viewer lights per pixel (a GPU's fragments are cheap); at the 1 px cut both agree within
+// the browser tests' canvas-to-server tolerance.
 
 enable primitive_index;
 
@@ -82,10 +86,32 @@ struct VIn {
 struct VOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) normal: vec3<f32>,
+    // lit colour (`vertex_light`): albedo × light (ALBEDO 0, 1) or the light alone, to
+    // multiply the texel by (ALBEDO 2); with a normal map, the albedo unlit (ALBEDO 0, 1)
     @location(1) color: vec3<f32>,
     // texture coordinates in the patch's atlas (ALBEDO 2)
     @location(2) uv: vec2<f32>,
     @location(3) @interpolate(flat) draw: u32,
+}
+
+// Lighting is per vertex, ambient plus a headlight (the direction to the eye from the vertex
+// is the pixel ray's at the vertex; a zero normal faces the eye): at a 1 px cut a triangle
+// covers about a pixel, so per-pixel lighting repeats the vertices' work for the same result,
+// and a software rasteriser pays per pixel for every instruction, per triangle for every
+// varying and per vertex for every attribute fetched (`meshwiki-bench render`). Only a
+// normal map, which carries detail finer than the triangles, is lit per pixel. Every
+// variant lights a vertex alike, so marking a part changes no other pixel.
+fn vertex_light(position: vec3<f32>, normal: vec3<f32>) -> f32 {
+    let l = length(normal);
+    var ndl = 1.0;
+    if (l > 1e-20) {
+        ndl = abs(dot(normal / l, normalize(frame.eye.xyz - position)));
+    }
+    return frame.light.x + frame.light.y * ndl;
+}
+
+fn lit_color(albedo: vec3<f32>, light: f32) -> vec3<f32> {
+    return clamp(albedo * light, vec3<f32>(0.0), vec3<f32>(1.0));
 }
 
 @vertex
@@ -93,10 +119,16 @@ fn vs_main(v: VIn, @builtin(instance_index) ii: u32) -> VOut {
     var out: VOut;
     out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
     out.normal = v.normal;
+    var albedo = frame.base_color.rgb;
     if (ALBEDO == 1u) {
-        out.color = v.color.rgb;
+        albedo = v.color.rgb;
+    }
+    if (NORMAL_MAP) {
+        out.color = albedo;
+    } else if (ALBEDO == 2u) {
+        out.color = vec3<f32>(vertex_light(v.position, v.normal));
     } else {
-        out.color = vec3<f32>(0.0);
+        out.color = lit_color(albedo, vertex_light(v.position, v.normal));
     }
     if (ALBEDO == 2u || NORMAL_MAP) {
         out.uv = v.uv;
@@ -105,6 +137,61 @@ fn vs_main(v: VIn, @builtin(instance_index) ii: u32) -> VOut {
     }
     out.draw = ii;
     return out;
+}
+
+// Plain images (no part marked, no normal map): one entry point per albedo, each reading
+// only the attributes it uses, with `vs_main`'s lit colour.
+struct LitIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+}
+
+struct LitOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) color: vec3<f32>,
+}
+
+fn lit(v: LitIn, albedo: vec3<f32>) -> LitOut {
+    var out: LitOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.color = lit_color(albedo, vertex_light(v.position, v.normal));
+    return out;
+}
+
+@vertex
+fn vs_lit_base(v: LitIn) -> LitOut {
+    return lit(v, frame.base_color.rgb);
+}
+
+@vertex
+fn vs_lit_vertex(v: LitIn, @location(2) color: vec4<f32>) -> LitOut {
+    return lit(v, color.rgb);
+}
+
+@fragment
+fn fs_lit(in: LitOut) -> @location(0) vec4<f32> {
+    return vec4<f32>(in.color, 1.0);
+}
+
+struct TexturedOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) light: vec3<f32>,
+    @location(1) uv: vec2<f32>,
+}
+
+@vertex
+fn vs_lit_texture(v: LitIn, @location(3) uv: vec2<f32>) -> TexturedOut {
+    var out: TexturedOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.light = vec3<f32>(vertex_light(v.position, v.normal));
+    out.uv = uv;
+    return out;
+}
+
+@fragment
+fn fs_lit_texture(in: TexturedOut) -> @location(0) vec4<f32> {
+    let texel = textureSampleLevel(atlas, atlas_sampler, in.uv, 0.0).rgb;
+    return vec4<f32>(clamp(texel * in.light, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
 }
 
 fn load_vec3(offset: u32, v: u32) -> vec3<f32> {
@@ -193,11 +280,15 @@ fn albedo(in: VOut) -> vec3<f32> {
     return frame.base_color.rgb;
 }
 
-// Headlight plus ambient, then the part tint.
+// The lit colour (per pixel with a normal map, else `vs_main`'s), then the part tint.
 fn shade(in: VOut, n: vec3<f32>, mask: u32) -> vec4<f32> {
-    let v = to_eye(in.clip);
-    let ndl = abs(dot(n, v));
-    var rgb = albedo(in) * (frame.light.x + frame.light.y * ndl);
+    var rgb = in.color;
+    if (NORMAL_MAP) {
+        let ndl = abs(dot(n, to_eye(in.clip)));
+        rgb = lit_color(albedo(in), frame.light.x + frame.light.y * ndl);
+    } else if (ALBEDO == 2u) {
+        rgb = clamp(albedo(in) * in.color, vec3<f32>(0.0), vec3<f32>(1.0));
+    }
     let tint = mask & 0xFFu;
     if (tint != 0u) {
         let c = palette[tint];

@@ -319,7 +319,7 @@ pub fn run(args: Args) -> Result<()> {
 /// reaches it; `None` where the finest does not.
 fn bytes_at(points: &[Point], target: f64) -> Option<f64> {
     let mut sorted: Vec<&Point> = points.iter().collect();
-    sorted.sort_by(|a, b| a.bytes.cmp(&b.bytes));
+    sorted.sort_by_key(|p| p.bytes);
     // From the fewest bytes up: the first point at or above the target.
     for (i, p) in sorted.iter().enumerate() {
         if p.psnr >= target {

@@ -90,27 +90,37 @@ pub enum Albedo {
 
 /// The vertex buffers of a patch's draw: positions and normals (f32 × 3), colours (RGBA8) and
 /// texture coordinates (unorm16 × 2), each a slice of the patch's buffer.
-const VERTEX_BUFFERS: [Option<wgpu::VertexBufferLayout<'static>>; 4] = [
-    Some(wgpu::VertexBufferLayout {
-        array_stride: 12,
-        step_mode: wgpu::VertexStepMode::Vertex,
-        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-    }),
-    Some(wgpu::VertexBufferLayout {
-        array_stride: 12,
-        step_mode: wgpu::VertexStepMode::Vertex,
-        attributes: &wgpu::vertex_attr_array![1 => Float32x3],
-    }),
-    Some(wgpu::VertexBufferLayout {
-        array_stride: 4,
-        step_mode: wgpu::VertexStepMode::Vertex,
-        attributes: &wgpu::vertex_attr_array![2 => Unorm8x4],
-    }),
-    Some(wgpu::VertexBufferLayout {
-        array_stride: 4,
-        step_mode: wgpu::VertexStepMode::Vertex,
-        attributes: &wgpu::vertex_attr_array![3 => Unorm16x2],
-    }),
+const VERTEX_BUFFERS: [Option<wgpu::VertexBufferLayout<'static>>; 4] =
+    [POSITIONS, NORMALS, COLORS, UVS];
+
+const POSITIONS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
+    array_stride: 12,
+    step_mode: wgpu::VertexStepMode::Vertex,
+    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+});
+const NORMALS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
+    array_stride: 12,
+    step_mode: wgpu::VertexStepMode::Vertex,
+    attributes: &wgpu::vertex_attr_array![1 => Float32x3],
+});
+const COLORS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
+    array_stride: 4,
+    step_mode: wgpu::VertexStepMode::Vertex,
+    attributes: &wgpu::vertex_attr_array![2 => Unorm8x4],
+});
+const UVS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
+    array_stride: 4,
+    step_mode: wgpu::VertexStepMode::Vertex,
+    attributes: &wgpu::vertex_attr_array![3 => Unorm16x2],
+});
+
+/// The vertex buffers of the per-vertex lit images (`vs_lit_*` in `render.wgsl`): positions
+/// and normals, and the colours (vertex albedo) or texture coordinates (atlas) only where
+/// read, so the rasteriser fetches nothing else.
+const LIT_BUFFERS: [[Option<wgpu::VertexBufferLayout<'static>>; 4]; 3] = [
+    [POSITIONS, NORMALS, None, None],
+    [POSITIONS, NORMALS, COLORS, None],
+    [POSITIONS, NORMALS, None, UVS],
 ];
 
 fn storage(binding: u32, visibility: ShaderStages) -> BindGroupLayoutEntry {
@@ -316,14 +326,24 @@ impl Pipelines {
             constants: &constants,
             ..Default::default()
         };
+        // Plain images without normal map: an entry point per albedo that fetches only what it
+        // reads (`vs_lit_*` in render.wgsl).
+        let (vertex, fragment, buffers) = match (variant, normal_map, albedo) {
+            (Variant::Image, false, Albedo::Base) => ("vs_lit_base", "fs_lit", &LIT_BUFFERS[0]),
+            (Variant::Image, false, Albedo::Vertex) => ("vs_lit_vertex", "fs_lit", &LIT_BUFFERS[1]),
+            (Variant::Image, false, Albedo::Texture) => {
+                ("vs_lit_texture", "fs_lit_texture", &LIT_BUFFERS[2])
+            }
+            _ => ("vs_main", variant.entry(), &VERTEX_BUFFERS),
+        };
         device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some(variant.entry()),
+            label: Some(fragment),
             layout: Some(&self.main_layout),
             vertex: wgpu::VertexState {
                 module: &self.render_module,
-                entry_point: Some("vs_main"),
+                entry_point: Some(vertex),
                 compilation_options: options.clone(),
-                buffers: &VERTEX_BUFFERS,
+                buffers,
             },
             primitive: wgpu::PrimitiveState {
                 topology: wgpu::PrimitiveTopology::TriangleList,
@@ -342,7 +362,7 @@ impl Pipelines {
             multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
                 module: &self.render_module,
-                entry_point: Some(variant.entry()),
+                entry_point: Some(fragment),
                 compilation_options: options,
                 targets,
             }),
