@@ -297,7 +297,8 @@ fn shade(in: VOut, n: vec3<f32>, mask: u32) -> vec4<f32> {
     return vec4<f32>(clamp(rgb, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
 }
 
-// A picture without parts marked: the colour alone.
+// A picture without parts marked, on a patch with a normal map (lit per pixel; without one,
+// `fs_lit` and `fs_lit_texture` draw it).
 @fragment
 fn fs_image(in: VOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     return shade(in, facing_normal(in, front), 0u);
