@@ -107,6 +107,11 @@ fn vertex_light(position: vec3<f32>, normal: vec3<f32>) -> f32 {
     if (l > 1e-20) {
         ndl = abs(dot(normal / l, normalize(frame.eye.xyz - position)));
     }
+    return headlight(ndl);
+}
+
+// Ambient plus the headlight at `ndl` = |n·v|.
+fn headlight(ndl: f32) -> f32 {
     return frame.light.x + frame.light.y * ndl;
 }
 
@@ -175,7 +180,7 @@ fn fs_lit(in: LitOut) -> @location(0) vec4<f32> {
 
 struct TexturedOut {
     @builtin(position) clip: vec4<f32>,
-    @location(0) light: vec3<f32>,
+    @location(0) light: f32,
     @location(1) uv: vec2<f32>,
 }
 
@@ -183,7 +188,7 @@ struct TexturedOut {
 fn vs_lit_texture(v: LitIn, @location(3) uv: vec2<f32>) -> TexturedOut {
     var out: TexturedOut;
     out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
-    out.light = vec3<f32>(vertex_light(v.position, v.normal));
+    out.light = vertex_light(v.position, v.normal);
     out.uv = uv;
     return out;
 }
@@ -191,7 +196,7 @@ fn vs_lit_texture(v: LitIn, @location(3) uv: vec2<f32>) -> TexturedOut {
 @fragment
 fn fs_lit_texture(in: TexturedOut) -> @location(0) vec4<f32> {
     let texel = textureSampleLevel(atlas, atlas_sampler, in.uv, 0.0).rgb;
-    return vec4<f32>(clamp(texel * in.light, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
+    return vec4<f32>(lit_color(texel, in.light), 1.0);
 }
 
 fn load_vec3(offset: u32, v: u32) -> vec3<f32> {
@@ -284,10 +289,9 @@ fn albedo(in: VOut) -> vec3<f32> {
 fn shade(in: VOut, n: vec3<f32>, mask: u32) -> vec4<f32> {
     var rgb = in.color;
     if (NORMAL_MAP) {
-        let ndl = abs(dot(n, to_eye(in.clip)));
-        rgb = lit_color(albedo(in), frame.light.x + frame.light.y * ndl);
+        rgb = lit_color(albedo(in), headlight(abs(dot(n, to_eye(in.clip)))));
     } else if (ALBEDO == 2u) {
-        rgb = clamp(albedo(in) * in.color, vec3<f32>(0.0), vec3<f32>(1.0));
+        rgb = lit_color(albedo(in), in.color.x);
     }
     let tint = mask & 0xFFu;
     if (tint != 0u) {

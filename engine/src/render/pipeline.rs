@@ -93,26 +93,26 @@ pub enum Albedo {
 const VERTEX_BUFFERS: [Option<wgpu::VertexBufferLayout<'static>>; 4] =
     [POSITIONS, NORMALS, COLORS, UVS];
 
-const POSITIONS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
-    array_stride: 12,
-    step_mode: wgpu::VertexStepMode::Vertex,
-    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-});
-const NORMALS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
-    array_stride: 12,
-    step_mode: wgpu::VertexStepMode::Vertex,
-    attributes: &wgpu::vertex_attr_array![1 => Float32x3],
-});
-const COLORS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
-    array_stride: 4,
-    step_mode: wgpu::VertexStepMode::Vertex,
-    attributes: &wgpu::vertex_attr_array![2 => Unorm8x4],
-});
-const UVS: Option<wgpu::VertexBufferLayout<'static>> = Some(wgpu::VertexBufferLayout {
-    array_stride: 4,
-    step_mode: wgpu::VertexStepMode::Vertex,
-    attributes: &wgpu::vertex_attr_array![3 => Unorm16x2],
-});
+const POSITIONS: Option<wgpu::VertexBufferLayout<'static>> =
+    vertex_buffer(12, &wgpu::vertex_attr_array![0 => Float32x3]);
+const NORMALS: Option<wgpu::VertexBufferLayout<'static>> =
+    vertex_buffer(12, &wgpu::vertex_attr_array![1 => Float32x3]);
+const COLORS: Option<wgpu::VertexBufferLayout<'static>> =
+    vertex_buffer(4, &wgpu::vertex_attr_array![2 => Unorm8x4]);
+const UVS: Option<wgpu::VertexBufferLayout<'static>> =
+    vertex_buffer(4, &wgpu::vertex_attr_array![3 => Unorm16x2]);
+
+/// A per-vertex buffer of `array_stride` bytes a vertex holding `attributes`.
+const fn vertex_buffer(
+    array_stride: u64,
+    attributes: &'static [wgpu::VertexAttribute],
+) -> Option<wgpu::VertexBufferLayout<'static>> {
+    Some(wgpu::VertexBufferLayout {
+        array_stride,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes,
+    })
+}
 
 /// The vertex buffers of the per-vertex lit images (`vs_lit_*` in `render.wgsl`): positions
 /// and normals, and the colours (vertex albedo) or texture coordinates (atlas) only where
