@@ -210,6 +210,14 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         Err(e) => bail!("build failed: {e}"),
     };
     print_summary(&report);
+    if !report.segments.is_empty() {
+        println!(
+            "  segments     {} fine ({:.1} vertices each), {} scales",
+            report.segments[0],
+            report.import.vertices as f64 / report.segments[0].max(1) as f64,
+            report.segments.len()
+        );
+    }
     println!(
         "  CPU time {cpu:.1} s for {:.1} s wall: {:.2} cores busy on average",
         report.seconds,

@@ -47,6 +47,35 @@ impl Sums {
     }
 }
 
+/// One level's patches: counts and stream bytes.
+#[derive(Default, Clone)]
+struct Level {
+    patches: usize,
+    triangles: usize,
+    vertices: usize,
+    border: usize,
+    shift: usize,
+    streams: [usize; 6],
+    stored: usize,
+}
+
+impl Level {
+    fn add(&mut self, b: &codec::BlobBytes, p: &codec::Patch) {
+        self.patches += 1;
+        self.triangles += p.indices.len() / 3;
+        self.vertices += p.original_ids.len();
+        self.border += codec::border_vertices(&p.indices, p.original_ids.len())
+            .iter()
+            .filter(|&&x| x)
+            .count();
+        self.shift += p.shift as usize;
+        for (s, n) in self.streams.iter_mut().zip(b.streams) {
+            *s += n;
+        }
+        self.stored += b.stored;
+    }
+}
+
 /// A blob re-encoded in the `MWP2` layout (same vertices, ids, precision and attributes).
 fn as_v2(blob: &[u8], grid: &codec::Grid, level: i32) -> Result<Vec<u8>> {
     let p = codec::decode(blob, grid)?;
@@ -77,10 +106,16 @@ pub fn print(path: &Path, level: i32) -> Result<()> {
     let lod = LodFile::open(path).with_context(|| format!("opening {}", path.display()))?;
     let grid = lod.grid();
     let (mut all, mut leaves, mut v2) = (Sums::default(), Sums::default(), Sums::default());
+    let mut levels: Vec<Level> = Vec::new();
     for (id, node) in lod.nodes().iter().enumerate() {
         let blob = lod.blob(id as u32)?;
         let (b, payload) = codec::blob_bytes(blob).with_context(|| format!("patch {id}"))?;
         all.add(&b, &payload, level);
+        let at = node.level as usize;
+        if levels.len() <= at {
+            levels.resize_with(at + 1, Level::default);
+        }
+        levels[at].add(&b, &codec::decode(blob, &grid)?);
         if node.level == 0 {
             leaves.add(&b, &payload, level);
         }
@@ -144,6 +179,35 @@ pub fn print(path: &Path, level: i32) -> Result<()> {
         mb(all.body),
         mb(alone_total)
     );
+    println!(
+        "  per level (stream bytes before zstd; border = full precision):\n  {:>5} {:>7} {:>9} {:>9} {:>7} {:>6} {:>9} {:>9} {:>9} {:>8}",
+        "level",
+        "patches",
+        "triangles",
+        "vertices",
+        "border",
+        "shift",
+        "idx b/t",
+        "pos b/v",
+        "id b/v",
+        "MB"
+    );
+    for (l, s) in levels.iter().enumerate() {
+        let per = |bytes: usize, n: usize| 8.0 * bytes as f64 / n.max(1) as f64;
+        println!(
+            "  {:>5} {:>7} {:>9} {:>9} {:>6.1}% {:>6.1} {:>9.2} {:>9.2} {:>9.2} {:>8.3}",
+            l,
+            s.patches,
+            s.triangles,
+            s.vertices,
+            100.0 * s.border as f64 / s.vertices.max(1) as f64,
+            s.shift as f64 / s.patches.max(1) as f64,
+            per(s.streams[0], s.triangles),
+            per(s.streams[1], s.vertices),
+            per(s.streams[2], s.vertices),
+            mb(s.stored)
+        );
+    }
     println!(
         "  the same patches in the MWP2 layout (meshoptimizer indices, varints, zstd): {:.2} MB stored; MWP3: {:.2} MB ({:.2}x smaller)",
         mb(v2.stored),
