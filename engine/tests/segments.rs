@@ -258,3 +258,64 @@ fn a_segment_click_selects_the_whole_segment_with_positions_from_its_leaves() {
     };
     assert!(select_segment(&lod, &file, &picked, file.scales(), None).is_err());
 }
+
+/// A rough surface (random heights up to four grid spacings) stops the region
+/// growing's normal rule after a few vertices, whatever the size cap: the buckets merge
+/// their own segments first, so the fine segments the build hands to the global merge stay
+/// within its working set (a quarter of the memory budget, 512 bytes a segment: 32768 at the
+/// smallest budget), and every vertex still has one, and the scales still coarsen.
+#[test]
+fn a_rough_scan_keeps_its_fine_segments_within_the_merge_budget() {
+    const M: usize = 420;
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let mut mesh = Mesh::default();
+    let s = 2.0 / (M - 1) as f32;
+    for j in 0..M {
+        for i in 0..M {
+            mesh.positions
+                .push([-1.0 + i as f32 * s, -1.0 + j as f32 * s, next() * 4.0 * s]);
+        }
+    }
+    for j in 0..M - 1 {
+        for i in 0..M - 1 {
+            let a = (j * M + i) as u32;
+            let m = M as u32;
+            mesh.indices
+                .extend_from_slice(&[a, a + 1, a + m + 1, a, a + m + 1, a + m]);
+        }
+    }
+    let dir = std::env::temp_dir().join(format!("mw-segments-rough-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let lod = dir.join("rough.mwlod");
+    let budget = 64usize << 20;
+    let options = BuildOptions {
+        memory_budget: budget,
+        threads: Some(2),
+        ..Default::default()
+    };
+    let report = lod::build_mesh(&mesh, &lod, &options, &NoProgress).expect("build");
+    let file = SegmentFile::open(&segment::path_for(&lod)).expect("the .mwseg");
+    let _ = std::fs::remove_dir_all(&dir);
+    let fit = budget / 4 / 512;
+    let fine = file.count(0) as usize;
+    assert_eq!(report.segments.first().copied(), Some(file.count(0)));
+    // Vertices on bucket borders are counted in each of their buckets' shares.
+    assert!(
+        fine <= fit + fit / 10,
+        "{fine} fine segments for a merge that holds {fit}"
+    );
+    assert!(fine * 2 > fit, "merged far below the bound: {fine}");
+    assert_eq!(file.vertices(), mesh.positions.len() as u64);
+    for v in 0..mesh.positions.len() as u32 {
+        assert!(file.fine_of(v).is_some_and(|f| (f as usize) < fine));
+    }
+    for k in 1..file.scales() {
+        assert!(file.count(k) < file.count(k - 1));
+    }
+}

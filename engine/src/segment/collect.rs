@@ -16,13 +16,16 @@ use std::sync::Mutex;
 use memmap2::MmapMut;
 
 use super::grow::{Boundary, BucketSegments, GrowParams, SegmentSums, grow};
-use super::merge::{MergeParams, merge};
+use super::merge::{MergeParams, coarsen, merge};
 use crate::lod::patch::BuildPatch;
 
 /// What a bucket keeps until the end of the build.
 #[derive(Debug, Default)]
 struct Summary {
     sums: Vec<SegmentSums>,
+    /// Per segment, the strongest boundary merged inside it by the bucket's own merge
+    /// (empty when there was none).
+    inner: Vec<f64>,
     boundaries: Vec<(u32, u32, Boundary)>,
     border: Vec<(u32, u32)>,
 }
@@ -35,6 +38,8 @@ pub struct Collector {
     map: Mutex<Option<MmapMut>>,
     summaries: Mutex<Vec<Summary>>,
     params: GrowParams,
+    /// Fine segments the global merge's working set holds.
+    fit: usize,
 }
 
 const UNSEEN: u64 = u64::MAX;
@@ -45,10 +50,11 @@ const BYTES_PER_SEGMENT: usize = 512;
 /// Most bytes of the global merge's working set, whatever the memory budget: 131k fine
 /// segments. A model seen whole covers a few hundred thousand pixels, a few pixels a fine
 /// segment at that count, and the pixel graph refines every boundary below segment size;
-/// finer segments only cost build time and memory. `meshwiki-bench build` on the 5M relief
-/// (2.5M vertices; at the default 1 GiB budget the merge could take 256 MiB, 8 vertices a
-/// segment, 19 now): 22.0 -> 17.8 s, peak memory 395 -> 277 MB. Scans under about 1M
-/// vertices keep 8-vertex segments.
+/// finer segments only cost build time and memory. A bucket whose grown segments exceed its
+/// share of that count (in proportion to its vertices) merges them itself first
+/// ([`coarsen`]), so the bound holds whatever the growing yields: on a rough surface the
+/// normal rule stops the growing at a few vertices, far below the size cap (the 5M relief:
+/// 2.5M vertices, 377k grown segments of 6.6 vertices at a cap of 20).
 const MERGE_BYTES: usize = 64 << 20;
 
 /// The most vertices of a fine segment: [`GrowParams::default`]'s (small superpixels, so
@@ -56,10 +62,15 @@ const MERGE_BYTES: usize = 64 << 20;
 /// fine segments would not fit the global merge's working set: a quarter of
 /// `memory_budget`, at most [`MERGE_BYTES`].
 fn fine_size(vertices: usize, memory_budget: usize) -> usize {
-    let fit = ((memory_budget / 4).min(MERGE_BYTES) / BYTES_PER_SEGMENT).max(1);
     GrowParams::default()
         .max_vertices
-        .max(vertices.div_ceil(fit))
+        .max(vertices.div_ceil(merge_fit(memory_budget)))
+}
+
+/// Fine segments the global merge may hold: its working set within a quarter of
+/// `memory_budget`, at most [`MERGE_BYTES`].
+fn merge_fit(memory_budget: usize) -> usize {
+    ((memory_budget / 4).min(MERGE_BYTES) / BYTES_PER_SEGMENT).max(1)
 }
 
 impl Collector {
@@ -98,17 +109,37 @@ impl Collector {
                 max_vertices: fine_size(vertices, memory_budget),
                 ..GrowParams::default()
             },
+            fit: merge_fit(memory_budget),
         })
     }
 
     /// Segments bucket number `bucket`, whose mesh is `mesh` (original ids in `mesh.ids`).
     pub fn add(&self, bucket: usize, mesh: &BuildPatch) -> io::Result<()> {
         let BucketSegments {
-            vertex_segment,
-            sums,
-            boundaries,
-            border,
+            mut vertex_segment,
+            mut sums,
+            mut boundaries,
+            mut border,
         } = grow(mesh, &self.params);
+        // The bucket's share of the global merge's working set.
+        let share = ((self.fit as u128 * vertex_segment.len() as u128)
+            .div_ceil(self.vertices.max(1) as u128) as usize)
+            .max(1);
+        let mut inner = Vec::new();
+        if sums.len() > share {
+            let c = coarsen(sums, boundaries, &MergeParams::default(), share);
+            for s in vertex_segment
+                .iter_mut()
+                .chain(border.iter_mut().map(|(_, s)| s))
+            {
+                *s = c.labels[*s as usize];
+            }
+            border.sort_unstable();
+            border.dedup();
+            sums = c.sums;
+            boundaries = c.boundaries;
+            inner = c.inner;
+        }
         {
             let mut guard = self
                 .map
@@ -133,6 +164,7 @@ impl Collector {
         if let Some(s) = summaries.get_mut(bucket) {
             *s = Summary {
                 sums,
+                inner,
                 boundaries,
                 border,
             };
@@ -159,9 +191,14 @@ impl Collector {
             total = total.saturating_add(s.sums.len() as u32);
         }
         let mut sums = Vec::with_capacity(total as usize);
+        let mut inner = Vec::new();
         let mut boundaries = Vec::new();
         let mut border = Vec::new();
         for (b, s) in summaries.into_iter().enumerate() {
+            if !s.inner.is_empty() {
+                inner.resize(sums.len(), 0.0);
+                inner.extend(&s.inner);
+            }
             sums.extend(s.sums);
             boundaries.extend(
                 s.boundaries
@@ -178,7 +215,7 @@ impl Collector {
             }
         }
         drop(border);
-        let hierarchy = merge(sums, boundaries, &MergeParams::default());
+        let hierarchy = merge(sums, inner, boundaries, &MergeParams::default());
         let fine_of = |packed: u64| {
             if packed == UNSEEN {
                 super::file::NONE

@@ -121,37 +121,157 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
     x
 }
 
+/// The merging shared by [`merge`] and [`coarsen`]: the live segments' sums and shared
+/// boundaries, their union-find, the candidate pairs by cost, and per live segment the
+/// strongest boundary merged inside it.
+struct Merger<'p> {
+    sums: Vec<SegmentSums>,
+    adjacency: Vec<FxHashMap<u32, Boundary>>,
+    parent: Vec<u32>,
+    heap: BinaryHeap<Candidate>,
+    inner: Vec<f64>,
+    live: usize,
+    params: &'p MergeParams,
+}
+
+/// One merge: the two segments that ended there, the strongest boundary merged inside each
+/// before, and the strength of the boundary between them.
+struct Merged {
+    ended: [(usize, f64); 2],
+    strength: f64,
+}
+
+impl<'p> Merger<'p> {
+    /// `inner`: per segment, the strongest boundary already merged inside it (empty: none).
+    fn new(
+        sums: Vec<SegmentSums>,
+        inner: Vec<f64>,
+        boundaries: impl IntoIterator<Item = (u32, u32, Boundary)>,
+        params: &'p MergeParams,
+    ) -> Merger<'p> {
+        let n = sums.len();
+        let mut adjacency: Vec<FxHashMap<u32, Boundary>> = vec![FxHashMap::default(); n];
+        for (a, b, bd) in boundaries {
+            if a == b || a as usize >= n || b as usize >= n {
+                continue;
+            }
+            adjacency[a as usize].entry(b).or_default().add(&bd);
+            adjacency[b as usize].entry(a).or_default().add(&bd);
+        }
+        let mut heap = BinaryHeap::new();
+        for a in 0..n {
+            for (&b, bd) in &adjacency[a] {
+                if (a as u32) < b {
+                    heap.push(Candidate {
+                        cost: cost(&sums[a], &sums[b as usize], bd, params).0,
+                        a: a as u32,
+                        b,
+                    });
+                }
+            }
+        }
+        let mut inner = inner;
+        inner.resize(n, 0.0);
+        Merger {
+            sums,
+            adjacency,
+            parent: (0..n as u32).collect(),
+            heap,
+            inner,
+            live: n,
+            params,
+        }
+    }
+
+    /// Merges the cheapest pair of neighbouring segments; `None` when no pair is left.
+    fn step(&mut self) -> Option<Merged> {
+        let params = self.params;
+        loop {
+            let c = self.heap.pop()?;
+            let (a, b) = (c.a as usize, c.b as usize);
+            if self.parent[a] != c.a || self.parent[b] != c.b {
+                continue;
+            }
+            // A candidate is current while its cost is (a changed pair was pushed again).
+            let Some((current, strength)) = self.adjacency[a]
+                .get(&c.b)
+                .map(|bd| cost(&self.sums[a], &self.sums[b], bd, params))
+            else {
+                continue;
+            };
+            if current.to_bits() != c.cost.to_bits() {
+                continue;
+            }
+            let ended = [(a, self.inner[a]), (b, self.inner[b])];
+            let merged_inner = self.inner[a].max(self.inner[b]).max(strength);
+            // Merge the smaller adjacency into the larger.
+            let (keep, gone) = if self.adjacency[a].len() >= self.adjacency[b].len() {
+                (a, b)
+            } else {
+                (b, a)
+            };
+            self.parent[gone] = keep as u32;
+            self.inner[keep] = merged_inner;
+            let keep_before = self.sums[keep].vertices;
+            let gone_sums = self.sums[gone];
+            self.sums[keep].add(&gone_sums);
+            let moved = std::mem::take(&mut self.adjacency[gone]);
+            let mut changed: Vec<u32> = moved.keys().copied().collect();
+            self.adjacency[keep].remove(&(gone as u32));
+            for (other, bd) in moved {
+                if other as usize == keep {
+                    continue;
+                }
+                let o = &mut self.adjacency[other as usize];
+                o.remove(&(gone as u32));
+                o.entry(keep as u32).or_default().add(&bd);
+                self.adjacency[keep].entry(other).or_default().add(&bd);
+            }
+            // New costs: pairs whose boundary changed (the neighbours of `gone`), and those
+            // whose smaller side was `keep` (or all, when mean normals weigh); the others'
+            // entries stay current.
+            let sums = &self.sums;
+            changed.extend(
+                self.adjacency[keep]
+                    .keys()
+                    .copied()
+                    .filter(|&o| params.normal != 0.0 || sums[o as usize].vertices > keep_before),
+            );
+            changed.sort_unstable();
+            changed.dedup();
+            for other in changed {
+                let Some(bd) = self.adjacency[keep].get(&other) else {
+                    continue;
+                };
+                let (x, y) = if (keep as u32) < other {
+                    (keep as u32, other)
+                } else {
+                    (other, keep as u32)
+                };
+                self.heap.push(Candidate {
+                    cost: cost(&self.sums[x as usize], &self.sums[y as usize], bd, params).0,
+                    a: x,
+                    b: y,
+                });
+            }
+            self.live -= 1;
+            return Some(Merged { ended, strength });
+        }
+    }
+}
+
 /// Merges the fine segments with sums `sums` and shared boundaries `boundaries` (`(a, b)`
 /// pairs in any order, repeated pairs added up) into coarser scales: one each time the
-/// number of segments halves, while at least two remain.
+/// number of segments halves, while at least two remain. `inner`: per fine segment, the
+/// strongest boundary merged inside it already (by [`coarsen`]; empty when none was).
 pub fn merge(
-    mut sums: Vec<SegmentSums>,
+    sums: Vec<SegmentSums>,
+    inner: Vec<f64>,
     boundaries: impl IntoIterator<Item = (u32, u32, Boundary)>,
     params: &MergeParams,
 ) -> Hierarchy {
     let n = sums.len();
-    let mut adjacency: Vec<FxHashMap<u32, Boundary>> = vec![FxHashMap::default(); n];
-    for (a, b, bd) in boundaries {
-        if a == b || a as usize >= n || b as usize >= n {
-            continue;
-        }
-        adjacency[a as usize].entry(b).or_default().add(&bd);
-        adjacency[b as usize].entry(a).or_default().add(&bd);
-    }
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    let mut heap = BinaryHeap::new();
-    for a in 0..n {
-        for (&b, bd) in &adjacency[a] {
-            if (a as u32) < b {
-                heap.push(Candidate {
-                    cost: cost(&sums[a], &sums[b as usize], bd, params).0,
-                    a: a as u32,
-                    b,
-                });
-            }
-        }
-    }
-    let mut live = n;
+    let mut m = Merger::new(sums, inner, boundaries, params);
     let mut next_target = n / 2;
     let mut hierarchy = Hierarchy {
         fine: n as u32,
@@ -161,8 +281,6 @@ pub fn merge(
     };
     // Per live segment, the snapshots `(scale, label)` it still is (not merged since).
     let mut open: Vec<Vec<(u32, u32)>> = (0..n as u32).map(|f| vec![(0, f)]).collect();
-    // Per live segment, the strongest boundary merged inside it.
-    let mut inner = vec![0f64; n];
     let record =
         |parent: &mut [u32], live: usize, h: &mut Hierarchy, open: &mut [Vec<(u32, u32)>]| {
             let scale = h.scales.len() as u32 + 1;
@@ -185,90 +303,86 @@ pub fn merge(
         };
     // Merging goes on to the end (every segment's strength); scales are recorded while at
     // least two segments remain.
-    while live > 1 {
-        let Some(c) = heap.pop() else { break };
-        let (a, b) = (c.a as usize, c.b as usize);
-        if parent[a] != c.a || parent[b] != c.b {
-            continue;
-        }
-        // A candidate is current while its cost is (a changed pair was pushed again).
-        let Some((current, strength)) = adjacency[a]
-            .get(&c.b)
-            .map(|bd| cost(&sums[a], &sums[b], bd, params))
-        else {
-            continue;
-        };
-        if current.to_bits() != c.cost.to_bits() {
-            continue;
-        }
+    while m.live > 1 {
+        let Some(merged) = m.step() else { break };
         // The two segments end here.
-        for r in [a, b] {
+        for (r, inner) in merged.ended {
             for (scale, label) in open[r].drain(..) {
-                hierarchy.strengths[scale as usize][label as usize] = (strength - inner[r]) as f32;
+                hierarchy.strengths[scale as usize][label as usize] =
+                    (merged.strength - inner) as f32;
             }
         }
-        let merged_inner = inner[a].max(inner[b]).max(strength);
-        // Merge the smaller adjacency into the larger.
-        let (keep, gone) = if adjacency[a].len() >= adjacency[b].len() {
-            (a, b)
-        } else {
-            (b, a)
-        };
-        parent[gone] = keep as u32;
-        inner[keep] = merged_inner;
-        let keep_before = sums[keep].vertices;
-        let gone_sums = sums[gone];
-        sums[keep].add(&gone_sums);
-        let moved = std::mem::take(&mut adjacency[gone]);
-        let mut changed: Vec<u32> = moved.keys().copied().collect();
-        adjacency[keep].remove(&(gone as u32));
-        for (other, bd) in moved {
-            if other as usize == keep {
-                continue;
-            }
-            let o = &mut adjacency[other as usize];
-            o.remove(&(gone as u32));
-            o.entry(keep as u32).or_default().add(&bd);
-            adjacency[keep].entry(other).or_default().add(&bd);
-        }
-        // New costs: pairs whose boundary changed (the neighbours of `gone`), and those whose
-        // smaller side was `keep` (or all, when mean normals weigh); the others' entries stay
-        // current.
-        changed.extend(
-            adjacency[keep]
-                .keys()
-                .copied()
-                .filter(|&o| params.normal != 0.0 || sums[o as usize].vertices > keep_before),
-        );
-        changed.sort_unstable();
-        changed.dedup();
-        for other in changed {
-            let Some(bd) = adjacency[keep].get(&other) else {
-                continue;
-            };
-            let (x, y) = if (keep as u32) < other {
-                (keep as u32, other)
-            } else {
-                (other, keep as u32)
-            };
-            heap.push(Candidate {
-                cost: cost(&sums[x as usize], &sums[y as usize], bd, params).0,
-                a: x,
-                b: y,
-            });
-        }
-        live -= 1;
-        if live <= next_target && next_target >= 2 {
-            record(&mut parent, live, &mut hierarchy, &mut open);
-            next_target = live / 2;
+        if m.live <= next_target && next_target >= 2 {
+            record(&mut m.parent, m.live, &mut hierarchy, &mut open);
+            next_target = m.live / 2;
         }
     }
     // Merging stopped early (separate surfaces): the components are the coarsest scale.
     let last = hierarchy.counts.last().map_or(n, |&c| c as usize);
-    if live < last && live >= 2 {
-        record(&mut parent, live, &mut hierarchy, &mut open);
+    if m.live < last && m.live >= 2 {
+        record(&mut m.parent, m.live, &mut hierarchy, &mut open);
     }
     hierarchy
+}
+
+/// Segments merged by [`coarsen`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coarsened {
+    /// Per input segment, its merged segment (numbered in order of first input member).
+    pub labels: Vec<u32>,
+    /// Per merged segment, its sums.
+    pub sums: Vec<SegmentSums>,
+    /// Per merged segment, the strongest boundary merged inside it.
+    pub inner: Vec<f64>,
+    /// Boundaries between merged segments `(a, b)`, `a < b`, sorted.
+    pub boundaries: Vec<(u32, u32, Boundary)>,
+}
+
+/// Merges as [`merge`] does, cheapest pair first, until at most `target` segments are left
+/// (or no neighbours are): the first stage of the merge, run on one bucket of a large scan so
+/// that what reaches the global merge fits its working set ([`super::collect`]). Merging a
+/// bucket alone is the global merge restricted to pairs inside the bucket: costs depend only
+/// on the two segments and their shared boundary.
+pub fn coarsen(
+    sums: Vec<SegmentSums>,
+    boundaries: impl IntoIterator<Item = (u32, u32, Boundary)>,
+    params: &MergeParams,
+    target: usize,
+) -> Coarsened {
+    let n = sums.len();
+    let mut m = Merger::new(sums, Vec::new(), boundaries, params);
+    while m.live > target.max(1) {
+        if m.step().is_none() {
+            break;
+        }
+    }
+    let mut label = vec![u32::MAX; n];
+    let mut labels = Vec::with_capacity(n);
+    let mut roots = Vec::with_capacity(m.live);
+    for f in 0..n as u32 {
+        let r = find(&mut m.parent, f) as usize;
+        if label[r] == u32::MAX {
+            label[r] = roots.len() as u32;
+            roots.push(r);
+        }
+        labels.push(label[r]);
+    }
+    let mut boundaries = Vec::new();
+    for (i, &r) in roots.iter().enumerate() {
+        for (&o, bd) in &m.adjacency[r] {
+            let j = label[o as usize];
+            if (i as u32) < j {
+                boundaries.push((i as u32, j, *bd));
+            }
+        }
+    }
+    boundaries.sort_unstable_by_key(|&(a, b, _)| (a, b));
+    Coarsened {
+        labels,
+        sums: roots.iter().map(|&r| m.sums[r]).collect(),
+        inner: roots.iter().map(|&r| m.inner[r]).collect(),
+        boundaries,
+    }
 }
 
 #[cfg(test)]
@@ -298,7 +412,7 @@ mod tests {
         let mut b: Vec<(u32, u32, Boundary)> =
             (0..7u32).map(|i| (i, i + 1, edge(1.0, 0.0, 0.1))).collect();
         b[3].2 = edge(1.0, 0.9, 0.0);
-        let h = merge(s, b, &MergeParams::default());
+        let h = merge(s, Vec::new(), b, &MergeParams::default());
         assert_eq!(h.fine, 8);
         assert_eq!(h.counts, vec![4, 2]);
         let last = h.scales.last().unwrap();
@@ -321,10 +435,51 @@ mod tests {
     fn separate_surfaces_are_never_merged() {
         let s = vec![sums(10, [0.0, 0.0, 1.0]); 6];
         let b = vec![(0, 1, edge(1.0, 0.0, 0.0)), (2, 3, edge(1.0, 0.0, 0.0))];
-        let h = merge(s, b, &MergeParams::default());
+        let h = merge(s, Vec::new(), b, &MergeParams::default());
         // 6 → 4 live after two merges; no scale at 3 (nothing left to merge).
         assert_eq!(h.counts, vec![4]);
         assert_eq!(h.scales[0][0], h.scales[0][1]);
         assert_ne!(h.scales[0][4], h.scales[0][5]);
+    }
+
+    /// Coarsening the chain of eight to two stops at the concave boundary, as the full merge
+    /// does; its sums add up, its one boundary is that crease, and each half records the
+    /// strongest boundary merged inside it, which the merge then carries on.
+    #[test]
+    fn coarsening_stops_at_its_target_and_keeps_what_the_merge_needs() {
+        let s = vec![sums(50, [0.0, 0.0, 1.0]); 8];
+        let mut b: Vec<(u32, u32, Boundary)> =
+            (0..7u32).map(|i| (i, i + 1, edge(1.0, 0.0, 0.1))).collect();
+        b[3].2 = edge(1.0, 0.9, 0.0);
+        let c = coarsen(s.clone(), b.clone(), &MergeParams::default(), 2);
+        assert_eq!(c.labels, vec![0, 0, 0, 0, 1, 1, 1, 1]);
+        assert_eq!(
+            c.sums.iter().map(|s| s.vertices).collect::<Vec<_>>(),
+            [200, 200]
+        );
+        assert_eq!(c.boundaries.len(), 1);
+        assert_eq!((c.boundaries[0].0, c.boundaries[0].1), (0, 1));
+        assert_eq!(c.boundaries[0].2, edge(1.0, 0.9, 0.0));
+        assert!(
+            c.inner.iter().all(|&x| x > 0.0 && x < 1e-2),
+            "{:?}",
+            c.inner
+        );
+        // Nothing to do below the target: the input, renumbered in order.
+        let same = coarsen(s.clone(), b.clone(), &MergeParams::default(), 8);
+        assert_eq!(same.labels, (0..8).collect::<Vec<u32>>());
+        assert_eq!(same.boundaries.len(), 7);
+        // The merge of the coarsened halves ends as the merge of the fine chain does, and
+        // the halves' strengths are the crease's less what was merged inside them.
+        let h = merge(
+            c.sums,
+            c.inner.clone(),
+            c.boundaries,
+            &MergeParams::default(),
+        );
+        let whole = merge(s, Vec::new(), b, &MergeParams::default());
+        let half = whole.counts.iter().position(|&n| n == 2).unwrap() + 1;
+        assert_eq!(whole.strengths[half], h.strengths[0]);
+        assert!((h.strengths[0][0] as f64 - (1e-3 + 4.0 * 0.9 - c.inner[0])).abs() < 1e-6);
     }
 }
