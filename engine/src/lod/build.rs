@@ -489,11 +489,20 @@ impl<'a> Builder<'a> {
         // 2 + 3. Buckets and leaves.
         let t = Instant::now();
         let vertex_count = ingested.positions.len();
-        let pool = builder.leaves(&mut ingested, scratch, threads)?;
+        let (pool, segments) = builder.leaves(&mut ingested, scratch, threads)?;
         builder
             .stages
             .push(("leaves".to_string(), t.elapsed().as_secs_f64()));
+        // The scan's arrays are done with: the global merge of the segments, the peak of the
+        // build's memory on large scans, runs without them.
         drop(ingested);
+        let t = Instant::now();
+        let path = scratch.join("segments.mwseg");
+        let counts = segments.finish(&path)?;
+        builder
+            .stages
+            .push(("segments".to_string(), t.elapsed().as_secs_f64()));
+        builder.segments = Some((path, counts));
 
         // 4. Levels.
         let t = Instant::now();
@@ -672,13 +681,14 @@ impl<'a> Builder<'a> {
         id
     }
 
-    /// Steps 2 and 3: spatial buckets, then feature-following leaf patches per bucket.
+    /// Steps 2 and 3: spatial buckets, then feature-following leaf patches per bucket; also
+    /// each bucket's surface segments, gathered for the merge that follows.
     fn leaves(
         &mut self,
         ingested: &mut Ingested,
         scratch: &Path,
         threads: usize,
-    ) -> Result<Vec<PoolItem>, BuildError> {
+    ) -> Result<(Vec<PoolItem>, Collector), BuildError> {
         let tris = ingested.triangle_count as usize;
         // Bucket size depends on the input and the budget only, never on the thread count, so
         // a build gives the same file on every machine. ~300 bytes of working memory per
@@ -783,13 +793,7 @@ impl<'a> Builder<'a> {
         }
         self.raw.flush()?;
         self.atlases.flush()?;
-        let t = Instant::now();
-        let path = scratch.join("segments.mwseg");
-        let counts = segments.finish(&path)?;
-        self.stages
-            .push(("segments".to_string(), t.elapsed().as_secs_f64()));
-        self.segments = Some((path, counts));
-        Ok(pool)
+        Ok((pool, segments))
     }
 
     /// Step 4: grouping and simplification, level by level, until a handful of roots remain.
