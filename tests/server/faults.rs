@@ -4,7 +4,10 @@
 //! Writes that fail answer 5xx for that request only, other requests go on, nothing half
 //! written is left (no row without its file, no file without its row, no partial upload), every
 //! acknowledged write survives, and once space is back the same requests succeed. Needs root (to
-//! mount); skips with a message otherwise.
+//! mount); skips with a message otherwise. And a disk that fails with I/O errors: an
+//! `LD_PRELOAD` shim (`eio_shim.c`, built with the system's C compiler) makes every write and
+//! sync under the data directory fail with EIO while a trigger file exists, with the same
+//! checks; it needs no root.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -296,5 +299,153 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
         "full disk: {failed} of 6 large saves refused with 5xx, {} acknowledged and kept; \
          uploads refused (also mid-stream) and nothing left; writes recover at once",
         acknowledged.len()
+    );
+}
+
+/// Builds `eio_shim.c` (beside this file) into a preloadable library in `dir`; `None` with a
+/// message when no C compiler is at hand.
+fn eio_shim(dir: &Path) -> Option<PathBuf> {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/server/eio_shim.c");
+    let lib = dir.join("libeio_shim.so");
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".to_string());
+    let ok = Command::new(&cc)
+        .args(["-shared", "-fPIC", "-O1", "-o"])
+        .arg(&lib)
+        .arg(&src)
+        .arg("-ldl")
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        eprintln!("skipping: no C compiler ({cc}) to build the I/O-error shim");
+        return None;
+    }
+    Some(lib)
+}
+
+/// A disk that fails with I/O errors (EIO on every write and sync under the data directory,
+/// injected by an `LD_PRELOAD` shim, no root needed): saves, edits and uploads get 5xx while it
+/// lasts, reads go on, nothing half-written stays, and once the disk works again the same
+/// requests succeed at once; after a restart the database passes SQLite's integrity check and
+/// holds exactly the acknowledged writes.
+#[test]
+fn io_errors_lose_nothing_and_recover() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let Some(shim) = eio_shim(work.path()) else {
+        return;
+    };
+    let data = work.path().join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    let data = std::fs::canonicalize(&data).unwrap();
+    let trigger = work.path().join("eio-on");
+    let out = add_user(&data, "admin", "admin", ADMIN_PASSWORD);
+    assert!(out.status.success());
+    let env = [
+        ("LD_PRELOAD", shim.as_path()),
+        ("MESHWIKI_EIO_DIR", data.as_path()),
+        ("MESHWIKI_EIO_TRIGGER", trigger.as_path()),
+    ];
+    let server = Server::start_env(&data, &[], &env);
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let first = create_content(&admin, "Before the errors", "Written on a working disk.");
+    let first_id = first["id"].as_i64().unwrap();
+    let bytes_a = b"attachment before the errors".to_vec();
+    let r = admin.upload(
+        "/api/v1/attachments",
+        &[],
+        "a.txt",
+        "text/plain",
+        &bytes_a,
+        true,
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    let attachments = vec![(r.json()["id"].as_i64().unwrap(), bytes_a)];
+
+    // The disk fails.
+    std::fs::write(&trigger, b"").unwrap();
+    for k in 0..4 {
+        let r = admin.post(
+            "/api/v1/contents",
+            &json!({"title": format!("During the errors {k}"), "body": "x", "comment": ""}),
+        );
+        assert!(
+            r.status >= 500,
+            "a save on a failing disk answered {}: {}",
+            r.status,
+            r.text()
+        );
+    }
+    let r = admin.put(
+        &format!("/api/v1/contents/{first_id}"),
+        &json!({"base_revision": 1, "title": "Edited during the errors", "body": "y"}),
+    );
+    assert!(r.status >= 500, "an edit: {} {}", r.status, r.text());
+    let r = admin.upload(
+        "/api/v1/attachments",
+        &[],
+        "b.bin",
+        "application/octet-stream",
+        &vec![9u8; 1 << 20],
+        true,
+    );
+    assert!(r.status >= 500, "an upload: {} {}", r.status, r.text());
+    assert!(
+        files_under(&data.join("uploads")).is_empty(),
+        "no partial upload left"
+    );
+    let r = admin.get(&format!("/api/v1/contents/{first_id}"));
+    assert_eq!(r.status, 200, "reads on a failing disk");
+    assert_eq!(r.json()["title"], "Before the errors");
+
+    // The disk works again: the same requests succeed at once.
+    std::fs::remove_file(&trigger).unwrap();
+    let r = admin.put(
+        &format!("/api/v1/contents/{first_id}"),
+        &json!({"base_revision": 1, "title": "Edited after the errors", "body": "y"}),
+    );
+    assert_eq!(r.status, 200, "an edit after the errors: {}", r.text());
+    let after = create_content(&admin, "After the errors", "The disk works again.");
+    let after_id = after["id"].as_i64().unwrap();
+    let bytes_b = vec![9u8; 1 << 20];
+    let r = admin.upload(
+        "/api/v1/attachments",
+        &[],
+        "b.bin",
+        "application/octet-stream",
+        &bytes_b,
+        true,
+    );
+    assert_eq!(r.status, 201, "an upload after the errors: {}", r.text());
+    let mut attachments = attachments;
+    attachments.push((r.json()["id"].as_i64().unwrap(), bytes_b));
+    check_attachments(&data, &admin, &attachments);
+
+    // After a restart (without the shim): consistent, and exactly what was acknowledged.
+    drop(admin);
+    drop(server);
+    assert_eq!(integrity(&data.join("meshwiki.db")), "ok");
+    let server = Server::start(&data);
+    let admin = server.login("admin", ADMIN_PASSWORD);
+    let list = admin.get("/api/v1/contents?limit=1000").json();
+    let mut titles: Vec<&str> = list
+        .as_array()
+        .unwrap_or_else(|| panic!("{list}"))
+        .iter()
+        .map(|c| c["title"].as_str().unwrap())
+        .collect();
+    titles.sort_unstable();
+    assert_eq!(titles, ["After the errors", "Edited after the errors"]);
+    assert_eq!(
+        admin.get(&format!("/api/v1/contents/{after_id}")).status,
+        200
+    );
+    check_attachments(&data, &admin, &attachments);
+    let hits = admin.get("/api/v1/search?q=works").json();
+    assert!(
+        hits.as_array()
+            .is_some_and(|h| h.iter().any(|x| x["id"] == after_id)),
+        "{hits}"
+    );
+    println!(
+        "I/O errors: saves, an edit and an upload refused with 5xx; reads went on; writes recovered at once"
     );
 }

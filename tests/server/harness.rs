@@ -22,16 +22,21 @@ pub struct Server {
 impl Server {
     /// Starts `meshwiki serve` on `data_dir` with extra arguments and waits until it listens.
     pub fn start_with(data_dir: &Path, extra: &[&str]) -> Server {
-        Server::spawn(data_dir, extra, Stdio::inherit())
+        Server::spawn(data_dir, extra, &[], Stdio::inherit())
+    }
+
+    /// [`Server::start_with`], with extra environment variables.
+    pub fn start_env(data_dir: &Path, extra: &[&str], env: &[(&str, &Path)]) -> Server {
+        Server::spawn(data_dir, extra, env, Stdio::inherit())
     }
 
     /// [`Server::start_with`], the server's log (stderr, warnings and errors) written to `log`.
     pub fn start_logging(data_dir: &Path, extra: &[&str], log: &Path) -> Server {
         let file = std::fs::File::create(log).expect("log file");
-        Server::spawn(data_dir, extra, Stdio::from(file))
+        Server::spawn(data_dir, extra, &[], Stdio::from(file))
     }
 
-    fn spawn(data_dir: &Path, extra: &[&str], stderr: Stdio) -> Server {
+    fn spawn(data_dir: &Path, extra: &[&str], env: &[(&str, &Path)], stderr: Stdio) -> Server {
         let mut child = Command::new(BIN)
             .arg("serve")
             .arg("--data-dir")
@@ -39,6 +44,7 @@ impl Server {
             .args(["--bind", "127.0.0.1:0", "--workers", "2"])
             .args(extra)
             .env("MESHWIKI_LOG", "warn")
+            .envs(env.iter().map(|&(k, v)| (k, v)))
             .stdout(Stdio::piped())
             .stderr(stderr)
             .spawn()
