@@ -38,6 +38,28 @@ fn position(i: usize, j: usize) -> [f32; 3] {
     [x, y, height(x, y)]
 }
 
+/// A height field over [-1, 1]² on an `m × m` grid of vertices (row by row), two triangles a
+/// cell.
+fn grid_mesh(m: usize, mut z: impl FnMut(f32, f32) -> f32) -> Mesh {
+    let mut mesh = Mesh::default();
+    let s = 2.0 / (m - 1) as f32;
+    for j in 0..m {
+        for i in 0..m {
+            let (x, y) = (-1.0 + i as f32 * s, -1.0 + j as f32 * s);
+            mesh.positions.push([x, y, z(x, y)]);
+        }
+    }
+    for j in 0..m - 1 {
+        for i in 0..m - 1 {
+            let a = (j * m + i) as u32;
+            let w = m as u32;
+            mesh.indices
+                .extend_from_slice(&[a, a + 1, a + w + 1, a, a + w + 1, a + w]);
+        }
+    }
+    mesh
+}
+
 struct Bump {
     dir: PathBuf,
     lod: PathBuf,
@@ -53,20 +75,7 @@ impl Drop for Bump {
 fn bump() -> &'static Bump {
     static B: OnceLock<Bump> = OnceLock::new();
     B.get_or_init(|| {
-        let mut mesh = Mesh::default();
-        for j in 0..N {
-            for i in 0..N {
-                mesh.positions.push(position(i, j));
-            }
-        }
-        for j in 0..N - 1 {
-            for i in 0..N - 1 {
-                let a = (j * N + i) as u32;
-                let n = N as u32;
-                mesh.indices
-                    .extend_from_slice(&[a, a + 1, a + n + 1, a, a + n + 1, a + n]);
-            }
-        }
+        let mesh = grid_mesh(N, height);
         let dir = std::env::temp_dir().join(format!("mw-segments-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let lod = dir.join("bump.mwlod");
@@ -274,22 +283,8 @@ fn a_rough_scan_keeps_its_fine_segments_within_the_merge_budget() {
         state ^= state << 17;
         (state >> 11) as f32 / (1u64 << 53) as f32
     };
-    let mut mesh = Mesh::default();
-    let s = 2.0 / (M - 1) as f32;
-    for j in 0..M {
-        for i in 0..M {
-            mesh.positions
-                .push([-1.0 + i as f32 * s, -1.0 + j as f32 * s, next() * 4.0 * s]);
-        }
-    }
-    for j in 0..M - 1 {
-        for i in 0..M - 1 {
-            let a = (j * M + i) as u32;
-            let m = M as u32;
-            mesh.indices
-                .extend_from_slice(&[a, a + 1, a + m + 1, a, a + m + 1, a + m]);
-        }
-    }
+    let spacing = 2.0 / (M - 1) as f32;
+    let mesh = grid_mesh(M, |_, _| next() * 4.0 * spacing);
     let dir = std::env::temp_dir().join(format!("mw-segments-rough-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let lod = dir.join("rough.mwlod");

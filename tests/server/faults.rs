@@ -78,6 +78,21 @@ fn files_under(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
+/// Uploads `bytes` as a standalone attachment (with the CSRF token).
+fn upload(c: &Client, name: &str, mime: &str, bytes: &[u8]) -> Resp {
+    c.upload("/api/v1/attachments", &[], name, mime, bytes, true)
+}
+
+/// The titles of every content, in the server's order.
+fn titles(c: &Client) -> Vec<String> {
+    let list = c.get("/api/v1/contents?limit=1000").json();
+    list.as_array()
+        .unwrap_or_else(|| panic!("{list}"))
+        .iter()
+        .map(|c| c["title"].as_str().unwrap_or_default().to_string())
+        .collect()
+}
+
 /// Integrity of the database file, by SQLite itself.
 fn integrity(db: &Path) -> String {
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -138,14 +153,7 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
     );
     let first_id = first["id"].as_i64().unwrap();
     let bytes_a = b"attachment before the fault".to_vec();
-    let r = admin.upload(
-        "/api/v1/attachments",
-        &[],
-        "a.txt",
-        "text/plain",
-        &bytes_a,
-        true,
-    );
+    let r = upload(&admin, "a.txt", "text/plain", &bytes_a);
     assert_eq!(r.status, 201, "{}", r.text());
     let mut attachments = vec![(r.json()["id"].as_i64().unwrap(), bytes_a)];
 
@@ -167,14 +175,7 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
     }
     assert!(failed > 0, "some write hit the full disk");
     let big_file = vec![42u8; 2 << 20];
-    let r = admin.upload(
-        "/api/v1/attachments",
-        &[],
-        "big.bin",
-        "application/octet-stream",
-        &big_file,
-        true,
-    );
+    let r = upload(&admin, "big.bin", "application/octet-stream", &big_file);
     assert!(
         r.status >= 500,
         "an upload to a full disk: {} {}",
@@ -198,14 +199,7 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
 
     // Space back: the same requests succeed.
     std::fs::remove_file(&filler).unwrap();
-    let r = admin.upload(
-        "/api/v1/attachments",
-        &[],
-        "big.bin",
-        "application/octet-stream",
-        &big_file,
-        true,
-    );
+    let r = upload(&admin, "big.bin", "application/octet-stream", &big_file);
     assert_eq!(r.status, 201, "after the fault: {}", r.text());
     attachments.push((r.json()["id"].as_i64().unwrap(), big_file.clone()));
     let after = create_content(&admin, "After the fault", "The disk has room again.");
@@ -221,13 +215,11 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
     let len = f.metadata().unwrap().len();
     f.set_len(len.saturating_sub(1 << 20)).unwrap();
     drop(f);
-    let r = admin.upload(
-        "/api/v1/attachments",
-        &[],
+    let r = upload(
+        &admin,
         "mid.bin",
         "application/octet-stream",
         &vec![7u8; 3 << 20],
-        true,
     );
     assert!(
         r.status >= 500,
@@ -254,16 +246,10 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
     assert_eq!(integrity(&data.join("meshwiki.db")), "ok");
     let server = Server::start(&data);
     let admin = server.login("admin", ADMIN_PASSWORD);
-    let list = admin.get("/api/v1/contents?limit=1000").json();
-    let titles: Vec<&str> = list
-        .as_array()
-        .unwrap_or_else(|| panic!("{list}"))
-        .iter()
-        .map(|c| c["title"].as_str().unwrap())
-        .collect();
+    let titles = titles(&admin);
     for (id, title) in &acknowledged {
         assert!(
-            titles.contains(&title.as_str()),
+            titles.contains(title),
             "acknowledged {id} {title} lost: {titles:?}"
         );
     }
@@ -276,7 +262,10 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
         acknowledged.len(),
         "only acknowledged writes exist: {titles:?}"
     );
-    assert!(titles.contains(&"After the fault") && titles.contains(&"Writable again"));
+    assert!(
+        titles.iter().any(|t| t == "After the fault")
+            && titles.iter().any(|t| t == "Writable again")
+    );
     let first = admin.get(&format!("/api/v1/contents/{first_id}")).json();
     let want = if edit_acknowledged {
         "Edited during the fault"
@@ -349,14 +338,7 @@ fn io_errors_lose_nothing_and_recover() {
     let first = create_content(&admin, "Before the errors", "Written on a working disk.");
     let first_id = first["id"].as_i64().unwrap();
     let bytes_a = b"attachment before the errors".to_vec();
-    let r = admin.upload(
-        "/api/v1/attachments",
-        &[],
-        "a.txt",
-        "text/plain",
-        &bytes_a,
-        true,
-    );
+    let r = upload(&admin, "a.txt", "text/plain", &bytes_a);
     assert_eq!(r.status, 201, "{}", r.text());
     let attachments = vec![(r.json()["id"].as_i64().unwrap(), bytes_a)];
 
@@ -379,13 +361,11 @@ fn io_errors_lose_nothing_and_recover() {
         &json!({"base_revision": 1, "title": "Edited during the errors", "body": "y"}),
     );
     assert!(r.status >= 500, "an edit: {} {}", r.status, r.text());
-    let r = admin.upload(
-        "/api/v1/attachments",
-        &[],
+    let r = upload(
+        &admin,
         "b.bin",
         "application/octet-stream",
         &vec![9u8; 1 << 20],
-        true,
     );
     assert!(r.status >= 500, "an upload: {} {}", r.status, r.text());
     assert!(
@@ -406,14 +386,7 @@ fn io_errors_lose_nothing_and_recover() {
     let after = create_content(&admin, "After the errors", "The disk works again.");
     let after_id = after["id"].as_i64().unwrap();
     let bytes_b = vec![9u8; 1 << 20];
-    let r = admin.upload(
-        "/api/v1/attachments",
-        &[],
-        "b.bin",
-        "application/octet-stream",
-        &bytes_b,
-        true,
-    );
+    let r = upload(&admin, "b.bin", "application/octet-stream", &bytes_b);
     assert_eq!(r.status, 201, "an upload after the errors: {}", r.text());
     let mut attachments = attachments;
     attachments.push((r.json()["id"].as_i64().unwrap(), bytes_b));
@@ -425,13 +398,7 @@ fn io_errors_lose_nothing_and_recover() {
     assert_eq!(integrity(&data.join("meshwiki.db")), "ok");
     let server = Server::start(&data);
     let admin = server.login("admin", ADMIN_PASSWORD);
-    let list = admin.get("/api/v1/contents?limit=1000").json();
-    let mut titles: Vec<&str> = list
-        .as_array()
-        .unwrap_or_else(|| panic!("{list}"))
-        .iter()
-        .map(|c| c["title"].as_str().unwrap())
-        .collect();
+    let mut titles = titles(&admin);
     titles.sort_unstable();
     assert_eq!(titles, ["After the errors", "Edited after the errors"]);
     assert_eq!(
