@@ -291,11 +291,12 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
     );
 }
 
-/// Builds `eio_shim.c` (beside this file) into a preloadable library in `dir`; `None` with a
+/// Builds `eio_shim.c` (beside this file) into a preloadable library under the target
+/// directory (not the temporary directory, which may be mounted `noexec`); `None` with a
 /// message when no C compiler is at hand.
-fn eio_shim(dir: &Path) -> Option<PathBuf> {
+fn eio_shim() -> Option<PathBuf> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/server/eio_shim.c");
-    let lib = dir.join("libeio_shim.so");
+    let lib = Path::new(env!("CARGO_TARGET_TMPDIR")).join("libeio_shim.so");
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".to_string());
     let ok = Command::new(&cc)
         .args(["-shared", "-fPIC", "-O1", "-o"])
@@ -319,7 +320,7 @@ fn eio_shim(dir: &Path) -> Option<PathBuf> {
 #[test]
 fn io_errors_lose_nothing_and_recover() {
     let work = tempfile::tempdir().expect("tempdir");
-    let Some(shim) = eio_shim(work.path()) else {
+    let Some(shim) = eio_shim() else {
         return;
     };
     let data = work.path().join("data");
