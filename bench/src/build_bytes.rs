@@ -76,9 +76,9 @@ impl Level {
     }
 }
 
-/// A blob re-encoded in the `MWP2` layout (same vertices, ids, precision and attributes).
-fn as_v2(blob: &[u8], grid: &codec::Grid, level: i32) -> Result<Vec<u8>> {
-    let p = codec::decode(blob, grid)?;
+/// A decoded patch re-encoded in the `MWP2` layout (same vertices, ids, precision and
+/// attributes).
+fn as_v2(p: &codec::Patch, level: i32) -> Vec<u8> {
     let corner_uvs: Vec<[f32; 2]> = p
         .indices
         .iter()
@@ -98,7 +98,7 @@ fn as_v2(blob: &[u8], grid: &codec::Grid, level: i32) -> Result<Vec<u8>> {
         shift: p.shift,
         texture,
     };
-    Ok(codec::encode_layout(&patch, level, Layout::Meshopt).0)
+    codec::encode_layout(&patch, level, Layout::Meshopt).0
 }
 
 /// Prints the breakdown of the LOD file at `path` (built at zstd `level`).
@@ -115,11 +115,12 @@ pub fn print(path: &Path, level: i32) -> Result<()> {
         if levels.len() <= at {
             levels.resize_with(at + 1, Level::default);
         }
-        levels[at].add(&b, &codec::decode(blob, &grid)?);
+        let patch = codec::decode(blob, &grid).with_context(|| format!("decoding patch {id}"))?;
+        levels[at].add(&b, &patch);
         if node.level == 0 {
             leaves.add(&b, &payload, level);
         }
-        let old = as_v2(blob, &grid, level).with_context(|| format!("patch {id} as MWP2"))?;
+        let old = as_v2(&patch, level);
         let (b, payload) = codec::blob_bytes(&old)?;
         v2.add(&b, &payload, level);
     }

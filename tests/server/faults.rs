@@ -83,6 +83,19 @@ fn upload(c: &Client, name: &str, mime: &str, bytes: &[u8]) -> Resp {
     c.upload("/api/v1/attachments", &[], name, mime, bytes, true)
 }
 
+/// What a test writes while the disk works: a content titled `title` (its id) and an
+/// attachment (its id and bytes).
+fn before_the_fault(c: &Client, title: &str) -> (i64, Vec<(i64, Vec<u8>)>) {
+    let first = create_content(c, title, "Written while the disk worked.");
+    let bytes = format!("attachment: {title}").into_bytes();
+    let r = upload(c, "a.txt", "text/plain", &bytes);
+    assert_eq!(r.status, 201, "{}", r.text());
+    (
+        first["id"].as_i64().unwrap(),
+        vec![(r.json()["id"].as_i64().unwrap(), bytes)],
+    )
+}
+
 /// The titles of every content, in the server's order.
 fn titles(c: &Client) -> Vec<String> {
     let list = c.get("/api/v1/contents?limit=1000").json();
@@ -146,16 +159,7 @@ fn full_and_failing_disks_lose_nothing_and_recover() {
     let admin = server.login("admin", ADMIN_PASSWORD);
 
     // Before the fault: a content and an attachment.
-    let first = create_content(
-        &admin,
-        "Before the fault",
-        "Written while the disk had room.",
-    );
-    let first_id = first["id"].as_i64().unwrap();
-    let bytes_a = b"attachment before the fault".to_vec();
-    let r = upload(&admin, "a.txt", "text/plain", &bytes_a);
-    assert_eq!(r.status, 201, "{}", r.text());
-    let mut attachments = vec![(r.json()["id"].as_i64().unwrap(), bytes_a)];
+    let (first_id, mut attachments) = before_the_fault(&admin, "Before the fault");
 
     // Disk full.
     let filler = fill(fs.path());
@@ -336,12 +340,7 @@ fn io_errors_lose_nothing_and_recover() {
     ];
     let server = Server::start_env(&data, &[], &env);
     let admin = server.login("admin", ADMIN_PASSWORD);
-    let first = create_content(&admin, "Before the errors", "Written on a working disk.");
-    let first_id = first["id"].as_i64().unwrap();
-    let bytes_a = b"attachment before the errors".to_vec();
-    let r = upload(&admin, "a.txt", "text/plain", &bytes_a);
-    assert_eq!(r.status, 201, "{}", r.text());
-    let attachments = vec![(r.json()["id"].as_i64().unwrap(), bytes_a)];
+    let (first_id, mut attachments) = before_the_fault(&admin, "Before the errors");
 
     // The disk fails.
     std::fs::write(&trigger, b"").unwrap();
@@ -389,7 +388,6 @@ fn io_errors_lose_nothing_and_recover() {
     let bytes_b = vec![9u8; 1 << 20];
     let r = upload(&admin, "b.bin", "application/octet-stream", &bytes_b);
     assert_eq!(r.status, 201, "an upload after the errors: {}", r.text());
-    let mut attachments = attachments;
     attachments.push((r.json()["id"].as_i64().unwrap(), bytes_b));
     check_attachments(&data, &admin, &attachments);
 

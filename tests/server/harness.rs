@@ -44,7 +44,7 @@ impl Server {
             .args(["--bind", "127.0.0.1:0", "--workers", "2"])
             .args(extra)
             .env("MESHWIKI_LOG", "warn")
-            .envs(env.iter().map(|&(k, v)| (k, v)))
+            .envs(env.iter().copied())
             .stdout(Stdio::piped())
             .stderr(stderr)
             .spawn()

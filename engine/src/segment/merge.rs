@@ -183,6 +183,25 @@ impl<'p> Merger<'p> {
         }
     }
 
+    /// The live segments numbered in order of their first input segment: per input segment
+    /// its number, and per number the live segment (its union-find root).
+    fn labels(&mut self) -> (Vec<u32>, Vec<usize>) {
+        let n = self.parent.len();
+        let mut label = vec![u32::MAX; n];
+        let mut labels = Vec::with_capacity(n);
+        let mut roots = Vec::with_capacity(self.live);
+        for f in 0..n as u32 {
+            let r = find(&mut self.parent, f) as usize;
+            if label[r] == u32::MAX {
+                label[r] = roots.len() as u32;
+                roots.push(r);
+            }
+            labels.push(label[r]);
+        }
+        debug_assert_eq!(roots.len(), self.live);
+        (labels, roots)
+    }
+
     /// Merges the cheapest pair of neighbouring segments; `None` when no pair is left.
     fn step(&mut self) -> Option<Merged> {
         let params = self.params;
@@ -281,26 +300,17 @@ pub fn merge(
     };
     // Per live segment, the snapshots `(scale, label)` it still is (not merged since).
     let mut open: Vec<Vec<(u32, u32)>> = (0..n as u32).map(|f| vec![(0, f)]).collect();
-    let record =
-        |parent: &mut [u32], live: usize, h: &mut Hierarchy, open: &mut [Vec<(u32, u32)>]| {
-            let scale = h.scales.len() as u32 + 1;
-            let mut label = vec![u32::MAX; n];
-            let mut labels = Vec::with_capacity(n);
-            let mut count = 0u32;
-            for f in 0..n as u32 {
-                let r = find(parent, f) as usize;
-                if label[r] == u32::MAX {
-                    label[r] = count;
-                    open[r].push((scale, count));
-                    count += 1;
-                }
-                labels.push(label[r]);
-            }
-            debug_assert_eq!(count as usize, live);
-            h.scales.push(labels);
-            h.counts.push(count);
-            h.strengths.push(vec![f32::INFINITY; count as usize]);
-        };
+    let record = |m: &mut Merger<'_>, h: &mut Hierarchy, open: &mut [Vec<(u32, u32)>]| {
+        let scale = h.scales.len() as u32 + 1;
+        let (labels, roots) = m.labels();
+        for (label, &r) in roots.iter().enumerate() {
+            open[r].push((scale, label as u32));
+        }
+        let count = roots.len() as u32;
+        h.scales.push(labels);
+        h.counts.push(count);
+        h.strengths.push(vec![f32::INFINITY; count as usize]);
+    };
     // Merging goes on to the end (every segment's strength); scales are recorded while at
     // least two segments remain.
     while m.live > 1 {
@@ -313,14 +323,14 @@ pub fn merge(
             }
         }
         if m.live <= next_target && next_target >= 2 {
-            record(&mut m.parent, m.live, &mut hierarchy, &mut open);
+            record(&mut m, &mut hierarchy, &mut open);
             next_target = m.live / 2;
         }
     }
     // Merging stopped early (separate surfaces): the components are the coarsest scale.
     let last = hierarchy.counts.last().map_or(n, |&c| c as usize);
     if m.live < last && m.live >= 2 {
-        record(&mut m.parent, m.live, &mut hierarchy, &mut open);
+        record(&mut m, &mut hierarchy, &mut open);
     }
     hierarchy
 }
@@ -349,28 +359,18 @@ pub fn coarsen(
     params: &MergeParams,
     target: usize,
 ) -> Coarsened {
-    let n = sums.len();
     let mut m = Merger::new(sums, Vec::new(), boundaries, params);
     while m.live > target.max(1) {
         if m.step().is_none() {
             break;
         }
     }
-    let mut label = vec![u32::MAX; n];
-    let mut labels = Vec::with_capacity(n);
-    let mut roots = Vec::with_capacity(m.live);
-    for f in 0..n as u32 {
-        let r = find(&mut m.parent, f) as usize;
-        if label[r] == u32::MAX {
-            label[r] = roots.len() as u32;
-            roots.push(r);
-        }
-        labels.push(label[r]);
-    }
+    let (labels, roots) = m.labels();
     let mut boundaries = Vec::new();
     for (i, &r) in roots.iter().enumerate() {
         for (&o, bd) in &m.adjacency[r] {
-            let j = label[o as usize];
+            // A neighbour is a live segment, so its own root: its label is the set's.
+            let j = labels[o as usize];
             if (i as u32) < j {
                 boundaries.push((i as u32, j, *bd));
             }
