@@ -848,15 +848,23 @@ fn encode_split(
     blob.extend_from_slice(&(payload.len() as u32).to_le_bytes());
     push_sections(&mut blob, image, None);
     blob.extend_from_slice(&body);
-    if v3 && !decodes_back(&blob, &indices, &decoded_pos, min, &ids) {
+    if v3 && !connectivity_reads_back(&index_stream, &indices, &predictions) {
         // Never seen: the front coder and its decoder mirror each other, and tests hold them
-        // to it on real scans; should a patch ever not read back, the older layout keeps it.
+        // to it on real scans; should a patch's connectivity ever not read back, the older
+        // layout keeps it. The residual streams follow from it: once the decoder has the same
+        // triangles and predictions, it makes the same guesses (the same functions on the same
+        // decoded values) and the range coder returns the residuals put in. Builds with debug
+        // assertions (the tests) still decode every whole patch back and compare.
         tracing::warn!(
             triangles = indices.len() / 3,
             "patch does not decode back in the MWP3 layout; written as MWP2"
         );
         return encode_split(patch, texture, zstd_level, Layout::Meshopt);
     }
+    debug_assert!(
+        !v3 || decodes_back(&blob, &indices, &decoded_pos, min, &ids),
+        "an MWP3 patch whose connectivity reads back does not decode back whole"
+    );
     (blob, used)
 }
 
@@ -933,8 +941,15 @@ pub fn with_images(
     Ok(out)
 }
 
+/// Whether an `MWP3` connectivity stream decodes to the triangles and vertex predictions it
+/// was made from (what the build checks of every patch it writes).
+fn connectivity_reads_back(stream: &[u8], indices: &[u32], predictions: &[Prediction]) -> bool {
+    frontcoder::decode(stream, predictions.len(), indices.len() / 3)
+        .is_ok_and(|(i, p)| i == indices && p == predictions)
+}
+
 /// Whether `blob` decodes to the triangles, grid positions (relative to `min`) and ids the
-/// encoder meant.
+/// encoder meant (builds with debug assertions check it of every `MWP3` patch).
 fn decodes_back(
     blob: &[u8],
     indices: &[u32],
