@@ -39,7 +39,7 @@ impl<'a> TriangleGrid<'a> {
             hi = Vec3::ZERO;
         }
         let extent = (hi - lo).max(Vec3::splat(1e-12));
-        let mut cell = (1.4 * (area / tri_count.max(1) as f64).sqrt()) as f32;
+        let mut cell = (3.0 * (area / tri_count.max(1) as f64).sqrt()) as f32;
         let max_cells = (tri_count * 16).max(64) as f32;
         if cell.is_nan() || cell <= 0.0 {
             cell = extent.max_element() / 8.0;
@@ -137,10 +137,43 @@ impl<'a> TriangleGrid<'a> {
 
     /// Distance from `p` to the nearest triangle (f32::MAX if there are none).
     pub fn distance(&self, p: [f32; 3]) -> f32 {
+        let mut near = u32::MAX;
+        self.distance_near(p, &mut near)
+    }
+
+    /// [`Self::distance`], starting from the triangle `near` (the nearest one of the previous
+    /// query, which `near` becomes for this one): its distance bounds the search from the
+    /// start, so more cells and boxes are skipped when queries come in surface order. The
+    /// result is the same minimum over the same triangles, whatever `near` is.
+    pub fn distance_near(&self, p: [f32; 3], near: &mut u32) -> f32 {
+        self.distance_above(p, near, -1.0)
+    }
+
+    /// The distance from `p` to the nearest triangle where it exceeds `floor`; otherwise some
+    /// distance at most `floor` (the search stops at the first triangle within `floor`), so
+    /// `floor.max(result)` is exact. A running maximum over many points (the Hausdorff
+    /// distance) needs no more: most points are nearer than the maximum so far, and their
+    /// search ends at the first triangle found within it, often `near`'s.
+    pub fn distance_above(&self, p: [f32; 3], near: &mut u32, floor: f32) -> f32 {
         if self.indices.is_empty() {
             return f32::MAX;
         }
+        let floor_sq = if floor >= 0.0 { floor * floor } else { -1.0 };
         let p = Vec3::from(p);
+        let corners = |t: u32| {
+            let tri = &self.indices[t as usize * 3..t as usize * 3 + 3];
+            [tri[0], tri[1], tri[2]].map(|i| Vec3::from(self.positions[i as usize]))
+        };
+        let mut best_sq = f32::MAX;
+        let mut best = u32::MAX;
+        if (*near as usize) < self.boxes.len() {
+            let [a, b, c] = corners(*near);
+            best_sq = point_triangle_distance_sq(p, a, b, c);
+            best = *near;
+            if best_sq <= floor_sq {
+                return best_sq.sqrt();
+            }
+        }
         let home = self.cell_of(p);
         // Distance from p to the grid box (p may lie outside it).
         let box_hi = self.origin
@@ -163,10 +196,10 @@ impl<'a> TriangleGrid<'a> {
             }
         }
         let max_ring = self.dims.iter().copied().max().unwrap_or(1);
-        let mut best_sq = f32::MAX;
+        let mut within = false;
         for ring in 0..=max_ring {
             self.visit_shell(home, ring, |cell| {
-                if self.cell_distance_sq(p, cell) >= best_sq {
+                if within || self.cell_distance_sq(p, cell) >= best_sq {
                     return;
                 }
                 let c = self.index(cell);
@@ -175,12 +208,21 @@ impl<'a> TriangleGrid<'a> {
                     if (lo - p).max(p - hi).max(Vec3::ZERO).length_squared() >= best_sq {
                         continue;
                     }
-                    let tri = &self.indices[t as usize * 3..t as usize * 3 + 3];
-                    let [a, b, cc] =
-                        [tri[0], tri[1], tri[2]].map(|i| Vec3::from(self.positions[i as usize]));
-                    best_sq = best_sq.min(point_triangle_distance_sq(p, a, b, cc));
+                    let [a, b, cc] = corners(t);
+                    let d = point_triangle_distance_sq(p, a, b, cc);
+                    if d < best_sq {
+                        best_sq = d;
+                        best = t;
+                        if d <= floor_sq {
+                            within = true;
+                            return;
+                        }
+                    }
                 }
             });
+            if within {
+                break;
+            }
             // Anything not yet visited lies beyond the searched cube of cells: at least
             // `ring + margin` cells away along one axis, and `outside` away from the grid box.
             let along = (ring as f32 + margin) * self.cell;
@@ -188,6 +230,7 @@ impl<'a> TriangleGrid<'a> {
                 break;
             }
         }
+        *near = best;
         best_sq.sqrt()
     }
 }
@@ -255,13 +298,17 @@ pub fn simplification_distance(
     let mut worst = 0.0f32;
     let to_simplified = TriangleGrid::new(positions, simplified);
     let mut seen = vec![false; positions.len()];
+    // Only the maximum counts, so each point's search ends at the first triangle within the
+    // maximum so far; consecutive points are neighbours on the surface (input order, then the
+    // simplified triangles' order), so each search starts from the previous one's triangle.
+    let mut near = u32::MAX;
     for &v in input {
         let v = v as usize;
         if kept[v] || seen[v] {
             continue;
         }
         seen[v] = true;
-        worst = worst.max(to_simplified.distance(positions[v]));
+        worst = worst.max(to_simplified.distance_above(positions[v], &mut near, worst));
     }
     // Simplified triangles that are input triangles lie on the input (distance 0), and so do
     // their edges: only the changed ones are sampled.
@@ -282,13 +329,14 @@ pub fn simplification_distance(
         .map(|(u, v)| (u.min(v), u.max(v)))
         .collect();
     let to_input = TriangleGrid::new(positions, input);
+    near = u32::MAX;
     let mut edges: Vec<(u32, u32)> = Vec::with_capacity(simplified.len());
     for t in simplified.chunks_exact(3) {
         if unchanged.contains(&canonical(t)) {
             continue;
         }
         let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
-        worst = worst.max(to_input.distance(((a + b + c) / 3.0).into()));
+        worst = worst.max(to_input.distance_above(((a + b + c) / 3.0).into(), &mut near, worst));
         for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
             let e = (u.min(v), u.max(v));
             if !input_edges.contains(&e) {
@@ -300,7 +348,7 @@ pub fn simplification_distance(
     edges.dedup();
     for (u, v) in edges {
         let mid = (Vec3::from(positions[u as usize]) + Vec3::from(positions[v as usize])) * 0.5;
-        worst = worst.max(to_input.distance(mid.into()));
+        worst = worst.max(to_input.distance_above(mid.into(), &mut near, worst));
     }
     worst
 }
@@ -339,6 +387,24 @@ mod tests {
                 .fold(f32::MAX, f32::min)
                 .sqrt();
             assert!((grid.distance(p) - brute).abs() < 1e-5, "{p:?}");
+            // Whatever triangle the search starts from, it finds the same minimum, and names
+            // a triangle at that distance.
+            let tris = (idx.len() / 3) as u32;
+            for start in [u32::MAX, 0, (k * 37) % tris, tris - 1, tris + 5] {
+                let mut near = start;
+                assert_eq!(grid.distance_near(p, &mut near), grid.distance(p), "{p:?}");
+                let tr = &idx[near as usize * 3..near as usize * 3 + 3];
+                let [a, b, c] = [tr[0], tr[1], tr[2]].map(|i| Vec3::from(pos[i as usize]));
+                let named = point_triangle_distance_sq(Vec3::from(p), a, b, c).sqrt();
+                assert_eq!(named, grid.distance(p), "{p:?}");
+                // Below a floor the search may stop early, at a triangle within the floor;
+                // above it the distance is exact.
+                for floor in [0.0, 0.01, 0.2, 1.0, 5.0] {
+                    let mut near = start;
+                    let d = grid.distance_above(p, &mut near, floor);
+                    assert_eq!(d.max(floor), grid.distance(p).max(floor), "{p:?} {floor}");
+                }
+            }
         }
     }
 }
