@@ -17,7 +17,7 @@
 
 use super::hausdorff::simplification_distance;
 use super::partition::{Triangles, partition};
-use super::patch::{BuildPatch, EdgeUses, edge_key};
+use super::patch::{BuildPatch, edge_key};
 use super::segsimplify::{self, SegmentParams, Simplifier};
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 use rustc_hash::FxHashMap as HashMap;
@@ -89,7 +89,7 @@ pub fn simplify_group(
         return None;
     }
     let (positions, coincident) = distinct_positions(&mesh.positions);
-    let border = id_border(mesh, &mesh.indices);
+    let border = local_border(mesh, &mesh.indices);
     let mut locks = border_locks(mesh, &border);
     for (v, lock) in locks.iter_mut().enumerate() {
         // Coincident twins (scanner "zipper" seams) are locked too: collapsing one onto the
@@ -224,7 +224,7 @@ fn sound_simplification(
         // vertices twice): both copies cover no surface, so dropping them repairs it, as long as
         // the border stays and nothing else is wrong.
         if let Some(repaired) = drop_repeated(mesh, input, &simplified)
-            && id_border(mesh, &repaired) == border
+            && local_border(mesh, &repaired) == border
         {
             bad = new_defects(mesh, input, &repaired, shared_outside);
             if bad.is_empty() {
@@ -268,21 +268,18 @@ fn distinct_positions(positions: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<bool>) {
 }
 
 /// Border edges (used by exactly one triangle) of `indices` over `mesh`'s vertices, as
-/// sorted original-ID keys.
-fn id_border(mesh: &BuildPatch, indices: &[u32]) -> Vec<u64> {
+/// sorted keys of local indices ([`edge_runs`]). A merged group has one vertex per original
+/// id, so its local topology is the ids' topology.
+fn local_border(mesh: &BuildPatch, indices: &[u32]) -> Vec<u64> {
     border_and_overuse(mesh, indices).0
 }
 
-/// [`id_border`], and whether some edge is used by more than two triangles (one sort for both).
+/// [`local_border`], and whether some edge is used by more than two triangles (one pass for
+/// both).
 fn border_and_overuse(mesh: &BuildPatch, indices: &[u32]) -> (Vec<u64>, bool) {
-    let edges = EdgeUses::of(
-        indices
-            .chunks_exact(3)
-            .map(|t| [t[0], t[1], t[2]].map(|i| mesh.ids[i as usize])),
-    );
     let mut border = Vec::new();
     let mut overused = false;
-    for (key, uses) in edges.counts() {
+    for (key, uses) in edge_runs(indices, mesh.ids.len(), false) {
         match uses {
             1 => border.push(key),
             2 => {}
@@ -294,37 +291,107 @@ fn border_and_overuse(mesh: &BuildPatch, indices: &[u32]) -> (Vec<u64>, bool) {
 
 /// Whether two triangles of `indices` have the same three vertices (either orientation).
 fn repeats_a_triangle(mesh: &BuildPatch, indices: &[u32]) -> bool {
-    let mut keys: Vec<u128> = indices
-        .chunks_exact(3)
-        .map(|t| {
-            let mut k = [0, 1, 2].map(|c| mesh.ids[t[c] as usize]);
-            k.sort_unstable();
-            (k[0] as u128) << 64 | (k[1] as u128) << 32 | k[2] as u128
-        })
-        .collect();
-    keys.sort_unstable();
-    keys.windows(2).any(|w| w[0] == w[1])
+    triangle_runs(indices, mesh.ids.len())
+        .iter()
+        .any(|&(_, c)| c > 1)
 }
 
 /// Simplification rounds with more locks before a group with defects is left unsimplified.
 const MAX_REPAIR_ROUNDS: usize = 4;
 
-/// Edge use counts and repeated triangles of a triangle set, by original id (sorted runs:
-/// cheaper than hashing on the build's hot path).
+/// Edge use counts and repeated triangles of a triangle set, over the group's local indices.
 struct Topology {
     /// (edge key, triangles using it), sorted by key.
     edges: Vec<(u64, u32)>,
-    /// Triangles (sorted corner ids) that occur more than once, with their count, sorted.
+    /// Triangles (sorted corners) that occur more than once, with their count, sorted.
     repeated: Vec<([u32; 3], u32)>,
 }
 
-fn runs<T: Copy + Ord>(mut keys: Vec<T>) -> Vec<(T, u32)> {
-    keys.sort_unstable();
-    let mut out: Vec<(T, u32)> = Vec::with_capacity(keys.len());
-    for k in keys {
-        match out.last_mut() {
-            Some((last, c)) if *last == k => *c += 1,
-            _ => out.push((k, 1)),
+/// Whether a triangle repeats a corner (covers no surface; left out of [`Topology`]).
+fn degenerate(t: &[u32]) -> bool {
+    t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
+}
+
+/// Each distinct edge of `indices` (corners below `n`) with its number of uses, sorted by
+/// the key `lo << 32 | hi` of its two ends (as [`edge_key`]); triangles repeating a corner
+/// are left out with `skip_degenerate`. A counting sort by the lower end, then a small sort
+/// of each vertex's few higher ends: linear in the triangles, where sorting all `3T` keys
+/// took a tenth of a build.
+fn edge_runs(indices: &[u32], n: usize, skip_degenerate: bool) -> Vec<(u64, u32)> {
+    let triangles = || {
+        indices
+            .chunks_exact(3)
+            .filter(move |t| !(skip_degenerate && degenerate(t)))
+    };
+    let mut start = vec![0u32; n + 1];
+    for t in triangles() {
+        for k in 0..3 {
+            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut higher = vec![0u32; start[n] as usize];
+    for t in triangles() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let slot = &mut fill[a.min(b) as usize];
+            higher[*slot as usize] = a.max(b);
+            *slot += 1;
+        }
+    }
+    let mut out: Vec<(u64, u32)> = Vec::with_capacity(higher.len() / 2 + 1);
+    for lo in 0..n {
+        let ends = &mut higher[start[lo] as usize..start[lo + 1] as usize];
+        ends.sort_unstable();
+        for &hi in ends.iter() {
+            let key = edge_key(lo as u32, hi);
+            match out.last_mut() {
+                Some((k, c)) if *k == key => *c += 1,
+                _ => out.push((key, 1)),
+            }
+        }
+    }
+    out
+}
+
+/// Each distinct triangle of `indices` without a repeated corner (corners sorted, below `n`)
+/// with its number of occurrences (either orientation), sorted: counting-sorted by the
+/// smallest corner, as [`edge_runs`].
+fn triangle_runs(indices: &[u32], n: usize) -> Vec<([u32; 3], u32)> {
+    let sorted = || {
+        indices.chunks_exact(3).filter(|t| !degenerate(t)).map(|t| {
+            let mut k = [t[0], t[1], t[2]];
+            k.sort_unstable();
+            k
+        })
+    };
+    let mut start = vec![0u32; n + 1];
+    for k in sorted() {
+        start[k[0] as usize + 1] += 1;
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut rest = vec![[0u32; 2]; start[n] as usize];
+    for k in sorted() {
+        let slot = &mut fill[k[0] as usize];
+        rest[*slot as usize] = [k[1], k[2]];
+        *slot += 1;
+    }
+    let mut out: Vec<([u32; 3], u32)> = Vec::with_capacity(rest.len());
+    for lo in 0..n {
+        let others = &mut rest[start[lo] as usize..start[lo + 1] as usize];
+        others.sort_unstable();
+        for &[b, c] in others.iter() {
+            let key = [lo as u32, b, c];
+            match out.last_mut() {
+                Some((k, count)) if *k == key => *count += 1,
+                _ => out.push((key, 1)),
+            }
         }
     }
     out
@@ -332,25 +399,11 @@ fn runs<T: Copy + Ord>(mut keys: Vec<T>) -> Vec<(T, u32)> {
 
 impl Topology {
     fn of(mesh: &BuildPatch, indices: &[u32]) -> Topology {
-        let n = indices.len() / 3;
-        let mut edges = Vec::with_capacity(n * 3);
-        let mut tris = Vec::with_capacity(n);
-        for tri in indices.chunks_exact(3) {
-            let ids = [0, 1, 2].map(|k| mesh.ids[tri[k] as usize]);
-            if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
-                continue;
-            }
-            for k in 0..3 {
-                edges.push(edge_key(ids[k], ids[(k + 1) % 3]));
-            }
-            let mut key = ids;
-            key.sort_unstable();
-            tris.push(key);
-        }
-        let mut repeated = runs(tris);
+        let n = mesh.ids.len();
+        let mut repeated = triangle_runs(indices, n);
         repeated.retain(|&(_, c)| c > 1);
         Topology {
-            edges: runs(edges),
+            edges: edge_runs(indices, n, true),
             repeated,
         }
     }
@@ -368,7 +421,7 @@ impl Topology {
     }
 }
 
-/// Original ids of the vertices of every defect the simplification `after` created that the
+/// Local indices of the vertices of every defect the simplification `after` created that the
 /// input (`before`) did not have:
 /// * an edge used by more than two triangles, or a triangle repeated (either orientation);
 /// * a new edge between two vertices both shared with patches outside the group: a neighbour
@@ -386,7 +439,8 @@ fn new_defects(
     for &(e, count) in &now.edges {
         let (a, b) = super::patch::edge_ends(e);
         // Cheap tests first: most edges are used twice and join an interior vertex.
-        let suspicious = count > 2 || (shared_outside(a) && shared_outside(b));
+        let suspicious = count > 2
+            || (shared_outside(mesh.ids[a as usize]) && shared_outside(mesh.ids[b as usize]));
         if !suspicious {
             continue;
         }
@@ -420,7 +474,7 @@ fn drop_repeated(mesh: &BuildPatch, before: &Topology, after: &[u32]) -> Option<
     }
     let mut out = Vec::with_capacity(after.len());
     for tri in after.chunks_exact(3) {
-        let mut key = [0, 1, 2].map(|k| mesh.ids[tri[k] as usize]);
+        let mut key = [tri[0], tri[1], tri[2]];
         key.sort_unstable();
         if extra.binary_search(&key).is_err() {
             out.extend_from_slice(tri);
@@ -429,12 +483,15 @@ fn drop_repeated(mesh: &BuildPatch, before: &Topology, after: &[u32]) -> Option<
     Some(out)
 }
 
-/// Locks the vertices with the given original ids and every vertex of the input triangles
+/// Locks the vertices with the given local indices and every vertex of the input triangles
 /// around them, so no collapse near them can happen again.
-fn lock_around(mesh: &BuildPatch, ids: &[u32], locks: &mut [SimplifyVertex]) {
-    let marked: rustc_hash::FxHashSet<u32> = ids.iter().copied().collect();
+fn lock_around(mesh: &BuildPatch, vertices: &[u32], locks: &mut [SimplifyVertex]) {
+    let mut marked = vec![false; mesh.ids.len()];
+    for &v in vertices {
+        marked[v as usize] = true;
+    }
     for t in mesh.indices.chunks_exact(3) {
-        if t.iter().any(|&v| marked.contains(&mesh.ids[v as usize])) {
+        if t.iter().any(|&v| marked[v as usize]) {
             for &v in t {
                 locks[v as usize] = SimplifyVertex::Lock;
             }
@@ -470,25 +527,15 @@ fn lock_one_ring(mesh: &BuildPatch, locks: &mut [SimplifyVertex]) {
     }
 }
 
-/// Lock flags: the vertices of the group's border edges (original-ID keys from [`id_border`]).
+/// Lock flags: the vertices of the group's border edges (local keys from [`local_border`]).
 fn border_locks(mesh: &BuildPatch, border: &[u64]) -> Vec<SimplifyVertex> {
-    let on_border: rustc_hash::FxHashSet<u32> = border
-        .iter()
-        .flat_map(|&e| {
-            let (a, b) = super::patch::edge_ends(e);
-            [a, b]
-        })
-        .collect();
-    mesh.ids
-        .iter()
-        .map(|id| {
-            if on_border.contains(id) {
-                SimplifyVertex::Lock
-            } else {
-                SimplifyVertex::None
-            }
-        })
-        .collect()
+    let mut locks = vec![SimplifyVertex::None; mesh.ids.len()];
+    for &e in border {
+        let (a, b) = super::patch::edge_ends(e);
+        locks[a as usize] = SimplifyVertex::Lock;
+        locks[b as usize] = SimplifyVertex::Lock;
+    }
+    locks
 }
 
 /// Splits simplified triangles (indexing `mesh`'s vertices) into compact patches.
