@@ -61,36 +61,44 @@ struct Adjacency {
 
 fn triangle_adjacency(indices: &[u32]) -> Adjacency {
     let tri_count = indices.len() / 3;
-    // (edge key, triangle) sorted by key groups the users of each edge.
-    let mut half: Vec<(u64, u32)> = Vec::with_capacity(tri_count * 3);
+    // The users of each edge, grouped by a counting sort on the edge's lower vertex and a
+    // small sort of that vertex's (higher vertex, triangle) pairs: the same groups, in the
+    // same order (by edge key, then triangle), as sorting every (key, triangle) pair, in
+    // linear time.
+    let n = indices.iter().max().map_or(0, |&m| m as usize + 1);
+    let mut start = vec![0u32; n + 1];
+    for tri in indices.chunks_exact(3) {
+        for k in 0..3 {
+            start[tri[k].min(tri[(k + 1) % 3]) as usize + 1] += 1;
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut half: Vec<(u32, u32)> = vec![(0, 0); indices.len()];
     for (t, tri) in indices.chunks_exact(3).enumerate() {
         for k in 0..3 {
             let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            let key = if a < b {
-                ((a as u64) << 32) | b as u64
-            } else {
-                ((b as u64) << 32) | a as u64
-            };
-            half.push((key, t as u32));
+            let slot = &mut fill[a.min(b) as usize];
+            half[*slot as usize] = (a.max(b), t as u32);
+            *slot += 1;
         }
     }
-    half.sort_unstable();
     let mut degree = vec![0u32; tri_count + 1];
     let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(tri_count * 3 / 2);
-    let mut i = 0;
-    while i < half.len() {
-        let mut j = i + 1;
-        while j < half.len() && half[j].0 == half[i].0 {
-            j += 1;
-        }
-        for w in half[i..j].windows(2) {
-            if w[0].1 != w[1].1 {
-                pairs.push((w[0].1, w[1].1));
-                degree[w[0].1 as usize] += 1;
-                degree[w[1].1 as usize] += 1;
+    for lo in 0..n {
+        let around = &mut half[start[lo] as usize..start[lo + 1] as usize];
+        around.sort_unstable();
+        for users in around.chunk_by(|x, y| x.0 == y.0) {
+            for w in users.windows(2) {
+                if w[0].1 != w[1].1 {
+                    pairs.push((w[0].1, w[1].1));
+                    degree[w[0].1 as usize] += 1;
+                    degree[w[1].1 as usize] += 1;
+                }
             }
         }
-        i = j;
     }
     let mut offsets = vec![0u32; tri_count + 1];
     for t in 0..tri_count {
