@@ -496,20 +496,32 @@ impl<'a> Builder<'a> {
         // The scan's arrays are done with: the global merge of the segments, the peak of the
         // build's memory on large scans, runs without them.
         drop(ingested);
-        let t = Instant::now();
-        let path = scratch.join("segments.mwseg");
-        let counts = segments.finish(&path)?;
-        builder
-            .stages
-            .push(("segments".to_string(), t.elapsed().as_secs_f64()));
-        builder.segments = Some((path, counts));
 
-        // 4. Levels.
+        // 4. Levels, with the global merge of the segments beside them on a thread of its own:
+        // the levels never read the segments, and the merge (one thread) takes the core that
+        // each level's last groups leave idle.
+        let path = scratch.join("segments.mwseg");
         let t = Instant::now();
-        let roots = builder.levels(pool, vertex_count)?;
+        let (roots, merged) = std::thread::scope(|s| {
+            let merge = s.spawn(|| {
+                let t = Instant::now();
+                segments
+                    .finish(&path)
+                    .map(|c| (c, t.elapsed().as_secs_f64()))
+            });
+            let roots = builder.levels(pool, vertex_count);
+            let merged = merge
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            (roots, merged)
+        });
+        let levels_seconds = t.elapsed().as_secs_f64();
+        let (roots, (counts, merge_seconds)) = (roots?, merged?);
+        builder.stages.push(("levels".to_string(), levels_seconds));
         builder
             .stages
-            .push(("levels".to_string(), t.elapsed().as_secs_f64()));
+            .push(("segments beside them".to_string(), merge_seconds));
+        builder.segments = Some((path, counts));
 
         // 5. Atlases (textured scans) and write.
         let textures = if builder.textured || options.normal_maps {
