@@ -435,6 +435,39 @@ fn compact_labels(labels: &mut [u32]) -> usize {
 mod tests {
     use super::*;
 
+    /// The counting sort links the same neighbours in the same order as sorting every
+    /// (edge key, triangle) pair, also across a non-manifold edge and a repeated triangle.
+    #[test]
+    fn adjacency_equals_the_sorted_pairs() {
+        let indices: Vec<u32> = vec![
+            0, 1, 2, 2, 1, 3, 1, 0, 2, 1, 3, 4, 3, 1, 5, 6, 2, 3, 7, 3, 6, 4, 7, 6, 2, 6, 8,
+        ];
+        let tri_count = indices.len() / 3;
+        let mut half: Vec<(u64, u32)> = Vec::new();
+        for (t, tri) in indices.chunks_exact(3).enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                half.push((((a.min(b) as u64) << 32) | a.max(b) as u64, t as u32));
+            }
+        }
+        half.sort_unstable();
+        let mut expected: Vec<Vec<u32>> = vec![Vec::new(); tri_count];
+        for run in half.chunk_by(|x, y| x.0 == y.0) {
+            for w in run.windows(2) {
+                if w[0].1 != w[1].1 {
+                    expected[w[0].1 as usize].push(w[1].1);
+                    expected[w[1].1 as usize].push(w[0].1);
+                }
+            }
+        }
+        let adjacency = triangle_adjacency(&indices);
+        for (t, want) in expected.iter().enumerate() {
+            assert_eq!(adjacency.of(t), want.as_slice(), "triangle {t}");
+        }
+        // (1, 3, 4) meets two triangles across the non-manifold edge (1, 3), and no other.
+        assert_eq!(adjacency.of(3), &[1, 4]);
+    }
+
     /// A folded sheet: two flat halves meeting at a sharp crease along x = 0.
     fn folded_sheet(n: usize) -> (Vec<[f32; 3]>, Vec<u32>) {
         let mut pos = Vec::new();

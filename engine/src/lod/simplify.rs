@@ -291,7 +291,7 @@ fn border_and_overuse(mesh: &BuildPatch, indices: &[u32]) -> (Vec<u64>, bool) {
 
 /// Whether two triangles of `indices` have the same three vertices (either orientation).
 fn repeats_a_triangle(mesh: &BuildPatch, indices: &[u32]) -> bool {
-    triangle_runs(indices, mesh.ids.len())
+    triangle_runs(indices, mesh.ids.len(), false)
         .iter()
         .any(|&(_, c)| c > 1)
 }
@@ -357,16 +357,19 @@ fn edge_runs(indices: &[u32], n: usize, skip_degenerate: bool) -> Vec<(u64, u32)
     out
 }
 
-/// Each distinct triangle of `indices` without a repeated corner (corners sorted, below `n`)
-/// with its number of occurrences (either orientation), sorted: counting-sorted by the
-/// smallest corner, as [`edge_runs`].
-fn triangle_runs(indices: &[u32], n: usize) -> Vec<([u32; 3], u32)> {
+/// Each distinct triangle of `indices` (corners sorted, below `n`) with its number of
+/// occurrences (either orientation), sorted; triangles repeating a corner are left out with
+/// `skip_degenerate`. Counting-sorted by the smallest corner, as [`edge_runs`].
+fn triangle_runs(indices: &[u32], n: usize, skip_degenerate: bool) -> Vec<([u32; 3], u32)> {
     let sorted = || {
-        indices.chunks_exact(3).filter(|t| !degenerate(t)).map(|t| {
-            let mut k = [t[0], t[1], t[2]];
-            k.sort_unstable();
-            k
-        })
+        indices
+            .chunks_exact(3)
+            .filter(move |t| !(skip_degenerate && degenerate(t)))
+            .map(|t| {
+                let mut k = [t[0], t[1], t[2]];
+                k.sort_unstable();
+                k
+            })
     };
     let mut start = vec![0u32; n + 1];
     for k in sorted() {
@@ -400,7 +403,7 @@ fn triangle_runs(indices: &[u32], n: usize) -> Vec<([u32; 3], u32)> {
 impl Topology {
     fn of(mesh: &BuildPatch, indices: &[u32]) -> Topology {
         let n = mesh.ids.len();
-        let mut repeated = triangle_runs(indices, n);
+        let mut repeated = triangle_runs(indices, n, true);
         repeated.retain(|&(_, c)| c > 1);
         Topology {
             edges: edge_runs(indices, n, true),
@@ -642,5 +645,70 @@ mod tests {
                 .all(|id| ids.contains(id))
         );
         assert!(step.distance > 0.0 && step.distance < 0.05);
+    }
+
+    /// The counting sorts give what sorting every key gives, on a soup with a repeated
+    /// triangle (both orientations), a non-manifold edge, a degenerate triangle and an unused
+    /// vertex.
+    #[test]
+    fn counted_runs_equal_sorted_runs() {
+        let indices: Vec<u32> = vec![
+            0, 1, 2, 2, 1, 3, 1, 0, 2, // (0, 1, 2) twice, once reversed
+            1, 3, 4, 3, 1, 5, // edge (1, 3) used three times
+            4, 4, 6, // a degenerate triangle
+            6, 2, 3, 7, 3, 6, 4, 7, 6,
+        ];
+        let n = 9;
+        let sorted_runs = |mut keys: Vec<u64>| {
+            keys.sort_unstable();
+            let mut out: Vec<(u64, u32)> = Vec::new();
+            for k in keys {
+                match out.last_mut() {
+                    Some((last, c)) if *last == k => *c += 1,
+                    _ => out.push((k, 1)),
+                }
+            }
+            out
+        };
+        for skip in [false, true] {
+            let keys: Vec<u64> = indices
+                .chunks_exact(3)
+                .filter(|t| !(skip && degenerate(t)))
+                .flat_map(|t| {
+                    [
+                        edge_key(t[0], t[1]),
+                        edge_key(t[1], t[2]),
+                        edge_key(t[2], t[0]),
+                    ]
+                })
+                .collect();
+            assert_eq!(edge_runs(&indices, n, skip), sorted_runs(keys));
+            let mut tris: Vec<[u32; 3]> = indices
+                .chunks_exact(3)
+                .filter(|t| !(skip && degenerate(t)))
+                .map(|t| {
+                    let mut k = [t[0], t[1], t[2]];
+                    k.sort_unstable();
+                    k
+                })
+                .collect();
+            tris.sort_unstable();
+            let mut expected: Vec<([u32; 3], u32)> = Vec::new();
+            for t in tris {
+                match expected.last_mut() {
+                    Some((last, c)) if *last == t => *c += 1,
+                    _ => expected.push((t, 1)),
+                }
+            }
+            assert_eq!(triangle_runs(&indices, n, skip), expected);
+        }
+        let runs = edge_runs(&indices, n, true);
+        assert_eq!(
+            runs.iter().find(|r| r.0 == edge_key(1, 3)).map(|r| r.1),
+            Some(3)
+        );
+        assert!(runs.iter().all(|r| r.0 != edge_key(4, 4)));
+        let repeated = triangle_runs(&indices, n, true);
+        assert!(repeated.contains(&([0, 1, 2], 2)));
     }
 }
