@@ -251,16 +251,30 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
     {
         return None;
     }
-    // Directed edges with their triangle, sorted: the triangles across `(a, b)` are the
-    // entries of `(b, a)`.
-    let key = |a: u32, b: u32| ((a as u64) << 32) | b as u64;
-    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(tris.len() * 3);
-    for (f, t) in tris.iter().enumerate() {
-        for k in 0..3 {
-            edges.push((key(t[k], t[(k + 1) % 3]), f as u32));
+    // Directed edges `(a, b)` with their triangle, grouped by `a` (a counting sort) and sorted
+    // by `(b, triangle)` within: the triangles across `(a, b)` are the entries `(a, f)` of
+    // vertex `b`, in triangle order.
+    let mut start = vec![0u32; n + 1];
+    for t in &tris {
+        for &v in t {
+            start[v as usize + 1] += 1;
         }
     }
-    edges.sort_unstable();
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut edges: Vec<(u32, u32)> = vec![(0, 0); tris.len() * 3];
+    for (f, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            let slot = &mut fill[t[k] as usize];
+            edges[*slot as usize] = (t[(k + 1) % 3], f as u32);
+            *slot += 1;
+        }
+    }
+    for v in 0..n {
+        edges[start[v] as usize..start[v + 1] as usize].sort_unstable();
+    }
     let mut visited = vec![false; tris.len()];
     let mut new_of = vec![u32::MAX; n];
     let mut order: Vec<u32> = Vec::with_capacity(n);
@@ -300,11 +314,9 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
             let Some(e) = front.pop() else { break };
             let (a, b) = (front.a[e as usize], front.b[e as usize]);
             let (oa, ob) = (order[a as usize], order[b as usize]);
-            let k = key(ob, oa);
-            let first = edges.partition_point(|&(x, _)| x < k);
-            let face = edges[first..]
+            let face = edges[start[ob as usize] as usize..start[ob as usize + 1] as usize]
                 .iter()
-                .take_while(|&&(x, _)| x == k)
+                .filter(|&&(x, _)| x == oa)
                 .map(|&(_, f)| f)
                 .find(|&f| !visited[f as usize]);
             let Some(f) = face else {
