@@ -322,24 +322,34 @@ pub fn simplification_distance(
         };
         [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
     };
-    let unchanged: rustc_hash::FxHashSet<[u32; 3]> = input.chunks_exact(3).map(canonical).collect();
-    let input_edges: rustc_hash::FxHashSet<(u32, u32)> = input
-        .chunks_exact(3)
-        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-        .map(|(u, v)| (u.min(v), u.max(v)))
-        .collect();
+    let n = positions.len();
+    let unchanged = ByVertex::new(
+        n,
+        input.chunks_exact(3).map(|t| {
+            let [a, b, c] = canonical(t);
+            (a, [b, c])
+        }),
+    );
+    let input_edges = ByVertex::new(
+        n,
+        input
+            .chunks_exact(3)
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .map(|(u, v)| (u.min(v), u.max(v))),
+    );
     let to_input = TriangleGrid::new(positions, input);
     near = u32::MAX;
     let mut edges: Vec<(u32, u32)> = Vec::with_capacity(simplified.len());
     for t in simplified.chunks_exact(3) {
-        if unchanged.contains(&canonical(t)) {
+        let [first, b, c] = canonical(t);
+        if unchanged.contains(first, [b, c]) {
             continue;
         }
         let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
         worst = worst.max(to_input.distance_above(((a + b + c) / 3.0).into(), &mut near, worst));
         for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
             let e = (u.min(v), u.max(v));
-            if !input_edges.contains(&e) {
+            if !input_edges.contains(e.0, e.1) {
                 edges.push(e);
             }
         }
@@ -351,6 +361,39 @@ pub fn simplification_distance(
         worst = worst.max(to_input.distance_above(mid.into(), &mut near, worst));
     }
     worst
+}
+
+/// Entries keyed by a vertex below `n`, grouped by a counting sort: a membership test reads
+/// only its vertex's few entries (cheaper than hashing every triangle and edge of a group).
+struct ByVertex<T> {
+    start: Vec<u32>,
+    items: Vec<T>,
+}
+
+impl<T: Copy + Default + PartialEq> ByVertex<T> {
+    fn new(n: usize, entries: impl Iterator<Item = (u32, T)> + Clone) -> ByVertex<T> {
+        let mut start = vec![0u32; n + 1];
+        for (v, _) in entries.clone() {
+            start[v as usize + 1] += 1;
+        }
+        for v in 0..n {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut items = vec![T::default(); start[n] as usize];
+        for (v, item) in entries {
+            let slot = &mut fill[v as usize];
+            items[*slot as usize] = item;
+            *slot += 1;
+        }
+        ByVertex { start, items }
+    }
+
+    fn contains(&self, v: u32, item: T) -> bool {
+        let v = v as usize;
+        v + 1 < self.start.len()
+            && self.items[self.start[v] as usize..self.start[v + 1] as usize].contains(&item)
+    }
 }
 
 #[cfg(test)]
