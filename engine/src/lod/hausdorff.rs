@@ -138,22 +138,19 @@ impl<'a> TriangleGrid<'a> {
     /// Distance from `p` to the nearest triangle (f32::MAX if there are none).
     pub fn distance(&self, p: [f32; 3]) -> f32 {
         let mut near = u32::MAX;
-        self.distance_near(p, &mut near)
-    }
-
-    /// [`Self::distance`], starting from the triangle `near` (the nearest one of the previous
-    /// query, which `near` becomes for this one): its distance bounds the search from the
-    /// start, so more cells and boxes are skipped when queries come in surface order. The
-    /// result is the same minimum over the same triangles, whatever `near` is.
-    pub fn distance_near(&self, p: [f32; 3], near: &mut u32) -> f32 {
-        self.distance_above(p, near, -1.0)
+        self.distance_above(p, &mut near, -1.0)
     }
 
     /// The distance from `p` to the nearest triangle where it exceeds `floor`; otherwise some
     /// distance at most `floor` (the search stops at the first triangle within `floor`), so
-    /// `floor.max(result)` is exact. A running maximum over many points (the Hausdorff
-    /// distance) needs no more: most points are nearer than the maximum so far, and their
-    /// search ends at the first triangle found within it, often `near`'s.
+    /// `floor.max(result)` is exact (a negative `floor`: always exact). A running maximum over
+    /// many points (the Hausdorff distance) needs no more: most points are nearer than the
+    /// maximum so far, and their search ends at the first triangle found within it.
+    ///
+    /// The search starts from the triangle `near` (the previous query's, which `near` becomes
+    /// for this one: the triangle found): its distance bounds the search from the start, so
+    /// more cells and boxes are skipped when queries come in surface order. Whatever `near`
+    /// is, the result is the same.
     pub fn distance_above(&self, p: [f32; 3], near: &mut u32, floor: f32) -> f32 {
         if self.indices.is_empty() {
             return f32::MAX;
@@ -435,7 +432,11 @@ mod tests {
             let tris = (idx.len() / 3) as u32;
             for start in [u32::MAX, 0, (k * 37) % tris, tris - 1, tris + 5] {
                 let mut near = start;
-                assert_eq!(grid.distance_near(p, &mut near), grid.distance(p), "{p:?}");
+                assert_eq!(
+                    grid.distance_above(p, &mut near, -1.0),
+                    grid.distance(p),
+                    "{p:?}"
+                );
                 let tr = &idx[near as usize * 3..near as usize * 3 + 3];
                 let [a, b, c] = [tr[0], tr[1], tr[2]].map(|i| Vec3::from(pos[i as usize]));
                 let named = point_triangle_distance_sq(Vec3::from(p), a, b, c).sqrt();
