@@ -216,17 +216,18 @@ fn sound_simplification(
             return Some(simplified);
         }
         let input = input.get_or_insert_with(|| Topology::of(mesh, &mesh.indices));
-        let mut bad = new_defects(mesh, input, &simplified, shared_outside);
+        let now = Topology::of(mesh, &simplified);
+        let mut bad = new_defects(mesh, input, &now, shared_outside);
         if bad.is_empty() {
             return Some(simplified);
         }
         // The usual defect is a collapse that folds two faces onto each other (the same three
         // vertices twice): both copies cover no surface, so dropping them repairs it, as long as
         // the border stays and nothing else is wrong.
-        if let Some(repaired) = drop_repeated(mesh, input, &simplified)
+        if let Some(repaired) = drop_repeated(input, &now, &simplified)
             && local_border(mesh, &repaired) == border
         {
-            bad = new_defects(mesh, input, &repaired, shared_outside);
+            bad = new_defects(mesh, input, &Topology::of(mesh, &repaired), shared_outside);
             if bad.is_empty() {
                 return Some(repaired);
             }
@@ -424,8 +425,8 @@ impl Topology {
     }
 }
 
-/// Local indices of the vertices of every defect the simplification `after` created that the
-/// input (`before`) did not have:
+/// Local indices of the vertices of every defect the simplification (topology `now`) created
+/// that the input (`before`) did not have:
 /// * an edge used by more than two triangles, or a triangle repeated (either orientation);
 /// * a new edge between two vertices both shared with patches outside the group: a neighbour
 ///   simplified in the same round may create the same edge (or the same triangle) on its side,
@@ -434,10 +435,9 @@ impl Topology {
 fn new_defects(
     mesh: &BuildPatch,
     before: &Topology,
-    after: &[u32],
+    now: &Topology,
     shared_outside: &dyn Fn(u32) -> bool,
 ) -> Vec<u32> {
-    let now = Topology::of(mesh, after);
     let mut bad = Vec::new();
     for &(e, count) in &now.edges {
         let (a, b) = super::patch::edge_ends(e);
@@ -462,10 +462,9 @@ fn new_defects(
     bad
 }
 
-/// `after` without the triangles it repeats (every copy) that `before` did not repeat; `None`
-/// when there are none.
-fn drop_repeated(mesh: &BuildPatch, before: &Topology, after: &[u32]) -> Option<Vec<u32>> {
-    let now = Topology::of(mesh, after);
+/// `after` (topology `now`) without the triangles it repeats (every copy) that `before` did
+/// not repeat; `None` when there are none.
+fn drop_repeated(before: &Topology, now: &Topology, after: &[u32]) -> Option<Vec<u32>> {
     let extra: Vec<[u32; 3]> = now
         .repeated
         .iter()
