@@ -23,7 +23,11 @@ pub struct TriangleGrid<'a> {
 }
 
 impl<'a> TriangleGrid<'a> {
-    /// Builds the grid; cells are about twice the mean edge length.
+    /// Builds the grid; cells are about five mean edges wide (8·√(mean area)). Few queries
+    /// reach the grid (in a build, 3–12%: most end at a triangle around the sample's own
+    /// vertices, [`Self::distance_above_trying`]), so coarse cells, which make the grid cheaper
+    /// to build, cost less than they save: on the 5M relief and the dragon the distance took
+    /// 8–10% less time than with cells of two edges.
     pub fn new(positions: &'a [[f32; 3]], indices: &'a [u32]) -> TriangleGrid<'a> {
         let tri_count = indices.len() / 3;
         let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
@@ -39,7 +43,7 @@ impl<'a> TriangleGrid<'a> {
             hi = Vec3::ZERO;
         }
         let extent = (hi - lo).max(Vec3::splat(1e-12));
-        let mut cell = (3.0 * (area / tri_count.max(1) as f64).sqrt()) as f32;
+        let mut cell = (8.0 * (area / tri_count.max(1) as f64).sqrt()) as f32;
         let max_cells = (tri_count * 16).max(64) as f32;
         if cell.is_nan() || cell <= 0.0 {
             cell = extent.max_element() / 8.0;
@@ -152,6 +156,20 @@ impl<'a> TriangleGrid<'a> {
     /// more cells and boxes are skipped when queries come in surface order. Whatever `near`
     /// is, the result is the same.
     pub fn distance_above(&self, p: [f32; 3], near: &mut u32, floor: f32) -> f32 {
+        self.distance_above_trying(p, near, std::iter::empty(), floor)
+    }
+
+    /// [`Self::distance_above`], trying the triangles `candidates` after `near` and before
+    /// the grid: triangles around the sample's own vertices, which usually hold one within
+    /// `floor` (the grid is then not searched at all) and otherwise bound the search. The
+    /// result is the same whatever the candidates are.
+    pub fn distance_above_trying(
+        &self,
+        p: [f32; 3],
+        near: &mut u32,
+        candidates: impl IntoIterator<Item = u32>,
+        floor: f32,
+    ) -> f32 {
         if self.indices.is_empty() {
             return f32::MAX;
         }
@@ -163,12 +181,20 @@ impl<'a> TriangleGrid<'a> {
         };
         let mut best_sq = f32::MAX;
         let mut best = u32::MAX;
-        if (*near as usize) < self.boxes.len() {
-            let [a, b, c] = corners(*near);
-            best_sq = point_triangle_distance_sq(p, a, b, c);
-            best = *near;
-            if best_sq <= floor_sq {
-                return best_sq.sqrt();
+        let tries = std::iter::once(*near).chain(candidates);
+        for t in tries {
+            if t as usize >= self.boxes.len() {
+                continue;
+            }
+            let [a, b, c] = corners(t);
+            let d = point_triangle_distance_sq(p, a, b, c);
+            if d < best_sq {
+                best_sq = d;
+                best = t;
+                if d <= floor_sq {
+                    *near = t;
+                    return d.sqrt();
+                }
             }
         }
         let home = self.cell_of(p);
@@ -293,11 +319,18 @@ pub fn simplification_distance(
     kept: &[bool],
 ) -> f32 {
     let mut worst = 0.0f32;
+    let n = positions.len();
     let to_simplified = TriangleGrid::new(positions, simplified);
-    let mut seen = vec![false; positions.len()];
+    // The triangles at each vertex, input and simplified: a sample's nearest triangle is
+    // usually one of those around its own vertices, tried before the grid.
+    let input_at = ByVertex::new(n, corners_of(input));
+    let simplified_at = ByVertex::new(n, corners_of(simplified));
+    let mut seen = vec![false; n];
     // Only the maximum counts, so each point's search ends at the first triangle within the
     // maximum so far; consecutive points are neighbours on the surface (input order, then the
-    // simplified triangles' order), so each search starts from the previous one's triangle.
+    // simplified triangles' order), so each search starts from the previous one's triangle,
+    // then tries the simplified triangles at the removed vertex's kept neighbours (the one
+    // after it in each input triangle around it: each neighbour of a fan once).
     let mut near = u32::MAX;
     for &v in input {
         let v = v as usize;
@@ -305,7 +338,19 @@ pub fn simplification_distance(
             continue;
         }
         seen[v] = true;
-        worst = worst.max(to_simplified.distance_above(positions[v], &mut near, worst));
+        let around = input_at.of(v as u32).iter().flat_map(|&t| {
+            let tri = &input[t as usize * 3..t as usize * 3 + 3];
+            let k = tri.iter().position(|&c| c as usize == v).unwrap_or(0);
+            let next = tri[(k + 1) % 3];
+            let tris: &[u32] = if kept[next as usize] {
+                simplified_at.of(next)
+            } else {
+                &[]
+            };
+            tris.iter().copied()
+        });
+        worst =
+            worst.max(to_simplified.distance_above_trying(positions[v], &mut near, around, worst));
     }
     // Simplified triangles that are input triangles lie on the input (distance 0), and so do
     // their edges: only the changed ones are sampled.
@@ -319,7 +364,6 @@ pub fn simplification_distance(
         };
         [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
     };
-    let n = positions.len();
     let unchanged = ByVertex::new(
         n,
         input.chunks_exact(3).map(|t| {
@@ -343,7 +387,15 @@ pub fn simplification_distance(
             continue;
         }
         let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
-        worst = worst.max(to_input.distance_above(((a + b + c) / 3.0).into(), &mut near, worst));
+        let around = [t[0], t[1], t[2]]
+            .into_iter()
+            .flat_map(|v| input_at.of(v).iter().copied());
+        worst = worst.max(to_input.distance_above_trying(
+            ((a + b + c) / 3.0).into(),
+            &mut near,
+            around,
+            worst,
+        ));
         for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
             let e = (u.min(v), u.max(v));
             if !input_edges.contains(e.0, e.1) {
@@ -355,9 +407,20 @@ pub fn simplification_distance(
     edges.dedup();
     for (u, v) in edges {
         let mid = (Vec3::from(positions[u as usize]) + Vec3::from(positions[v as usize])) * 0.5;
-        worst = worst.max(to_input.distance_above(mid.into(), &mut near, worst));
+        let around = [u, v]
+            .into_iter()
+            .flat_map(|v| input_at.of(v).iter().copied());
+        worst = worst.max(to_input.distance_above_trying(mid.into(), &mut near, around, worst));
     }
     worst
+}
+
+/// (corner, triangle) for every corner of `indices`.
+fn corners_of(indices: &[u32]) -> impl Iterator<Item = (u32, u32)> + Clone + '_ {
+    indices
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| (v, (i / 3) as u32))
 }
 
 /// Entries keyed by a vertex below `n`, grouped by a counting sort: a membership test reads
@@ -384,6 +447,15 @@ impl<T: Copy + Default + PartialEq> ByVertex<T> {
             *slot += 1;
         }
         ByVertex { start, items }
+    }
+
+    fn of(&self, v: u32) -> &[T] {
+        let v = v as usize;
+        if v + 1 < self.start.len() {
+            &self.items[self.start[v] as usize..self.start[v + 1] as usize]
+        } else {
+            &[]
+        }
     }
 
     fn contains(&self, v: u32, item: T) -> bool {
@@ -442,10 +514,15 @@ mod tests {
                 let named = point_triangle_distance_sq(Vec3::from(p), a, b, c).sqrt();
                 assert_eq!(named, grid.distance(p), "{p:?}");
                 // Below a floor the search may stop early, at a triangle within the floor;
-                // above it the distance is exact.
+                // above it the distance is exact, whatever candidates are tried first (any
+                // triangles, out-of-range ones and repeats included).
                 for floor in [0.0, 0.01, 0.2, 1.0, 5.0] {
                     let mut near = start;
                     let d = grid.distance_above(p, &mut near, floor);
+                    assert_eq!(d.max(floor), grid.distance(p).max(floor), "{p:?} {floor}");
+                    let candidates = [(k * 13) % tris, tris + 1, (k * 13) % tris, k % tris];
+                    let mut near = start;
+                    let d = grid.distance_above_trying(p, &mut near, candidates, floor);
                     assert_eq!(d.max(floor), grid.distance(p).max(floor), "{p:?} {floor}");
                 }
             }
