@@ -17,7 +17,9 @@
 
 use super::hausdorff::simplification_distance;
 use super::partition::{Triangles, partition};
-use super::patch::{BuildPatch, edge_key};
+#[cfg(test)]
+use super::patch::edge_key;
+use super::patch::{BuildPatch, degenerate, edge_runs};
 use super::segsimplify::{self, SegmentParams, Simplifier};
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 use rustc_hash::FxHashMap as HashMap;
@@ -306,56 +308,6 @@ struct Topology {
     edges: Vec<(u64, u32)>,
     /// Triangles (sorted corners) that occur more than once, with their count, sorted.
     repeated: Vec<([u32; 3], u32)>,
-}
-
-/// Whether a triangle repeats a corner (covers no surface; left out of [`Topology`]).
-fn degenerate(t: &[u32]) -> bool {
-    t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
-}
-
-/// Each distinct edge of `indices` (corners below `n`) with its number of uses, sorted by
-/// the key `lo << 32 | hi` of its two ends (as [`edge_key`]); triangles repeating a corner
-/// are left out with `skip_degenerate`. A counting sort by the lower end, then a small sort
-/// of each vertex's few higher ends: linear in the triangles, where sorting all `3T` keys
-/// took a tenth of a build.
-fn edge_runs(indices: &[u32], n: usize, skip_degenerate: bool) -> Vec<(u64, u32)> {
-    let triangles = || {
-        indices
-            .chunks_exact(3)
-            .filter(move |t| !(skip_degenerate && degenerate(t)))
-    };
-    let mut start = vec![0u32; n + 1];
-    for t in triangles() {
-        for k in 0..3 {
-            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
-        }
-    }
-    for v in 0..n {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut higher = vec![0u32; start[n] as usize];
-    for t in triangles() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let slot = &mut fill[a.min(b) as usize];
-            higher[*slot as usize] = a.max(b);
-            *slot += 1;
-        }
-    }
-    let mut out: Vec<(u64, u32)> = Vec::with_capacity(higher.len() / 2 + 1);
-    for lo in 0..n {
-        let ends = &mut higher[start[lo] as usize..start[lo + 1] as usize];
-        ends.sort_unstable();
-        for &hi in ends.iter() {
-            let key = edge_key(lo as u32, hi);
-            match out.last_mut() {
-                Some((k, c)) if *k == key => *c += 1,
-                _ => out.push((key, 1)),
-            }
-        }
-    }
-    out
 }
 
 /// Each distinct triangle of `indices` (corners sorted, below `n`) with its number of

@@ -17,7 +17,7 @@ use std::collections::VecDeque;
 
 use rustc_hash::FxHashMap;
 
-use crate::lod::patch::{BuildPatch, EdgeUses, edge_ends};
+use crate::lod::patch::{BuildPatch, EdgeUses, edge_ends, edge_runs};
 
 /// Settings of the region growing.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -117,16 +117,26 @@ pub fn grow(mesh: &BuildPatch, params: &GrowParams) -> BucketSegments {
     if n == 0 {
         return BucketSegments::default();
     }
-    // Unique edges with their use counts (the hierarchy's border rule: used once, border).
-    let edges: Vec<(u32, u32, usize)> =
+    // Unique edges with their use counts (the hierarchy's border rule: used once, border),
+    // counting-sorted on the local indices when they are all in range (a build's buckets).
+    let counts: Vec<(u64, usize)> = if mesh.indices.iter().all(|&i| (i as usize) < n) {
+        edge_runs(&mesh.indices, n, false)
+            .into_iter()
+            .map(|(key, uses)| (key, uses as usize))
+            .collect()
+    } else {
         EdgeUses::of(mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]))
             .counts()
-            .map(|(key, uses)| {
-                let (a, b) = edge_ends(key);
-                (a, b, uses)
-            })
-            .filter(|&(a, b, _)| a != b && (a as usize) < n && (b as usize) < n)
-            .collect();
+            .collect()
+    };
+    let edges: Vec<(u32, u32, usize)> = counts
+        .into_iter()
+        .map(|(key, uses)| {
+            let (a, b) = edge_ends(key);
+            (a, b, uses)
+        })
+        .filter(|&(a, b, _)| a != b && (a as usize) < n && (b as usize) < n)
+        .collect();
     // Vertex adjacency (CSR).
     let mut start = vec![0u32; n + 1];
     for &(a, b, _) in &edges {
