@@ -93,12 +93,18 @@ impl PartialOrd for Candidate {
 /// The merge cost of `a` and `b` and the strength of their boundary (the cost without the
 /// size factor).
 fn cost(a: &SegmentSums, b: &SegmentSums, bd: &Boundary, p: &MergeParams) -> (f64, f64) {
-    let (na, nb) = (a.mean_normal(), b.mean_normal());
-    let cos = (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]).clamp(-1.0, 1.0);
-    let angle = if na == [0.0; 3] || nb == [0.0; 3] {
+    // The normal term only where it weighs (not by default): two square roots and an arc
+    // cosine per cost, and the merge computes millions.
+    let angle = if p.normal == 0.0 {
         0.0
     } else {
-        cos.acos() / std::f64::consts::PI
+        let (na, nb) = (a.mean_normal(), b.mean_normal());
+        let cos = (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]).clamp(-1.0, 1.0);
+        if na == [0.0; 3] || nb == [0.0; 3] {
+            0.0
+        } else {
+            cos.acos() / std::f64::consts::PI
+        }
     };
     let fold = if bd.length > 0.0 {
         (p.concave * bd.concave + p.convex * bd.convex) / bd.length
