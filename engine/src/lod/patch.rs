@@ -64,7 +64,8 @@ pub fn edge_ends(key: u64) -> (u32, u32) {
     ((key >> 32) as u32, key as u32)
 }
 
-/// Whether a triangle repeats a corner (covers no surface; left out of [`Topology`]).
+/// Whether a triangle repeats a corner (covers no surface; the simplifier's topology checks
+/// leave such triangles out).
 pub fn degenerate(t: &[u32]) -> bool {
     t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
 }
