@@ -5,7 +5,7 @@
 //! that a cut at error E is within E of the scan. We measure the simplified group against its
 //! input (every removed input vertex to the simplified surface; centroids and edge midpoints of
 //! simplified triangles to the input surface) and accumulate bounds level by level through the
-//! triangle inequality (see [`super::dag`]).
+//! triangle inequality (in `super::build`; docs/FORMAT.md states the rule).
 
 use glam::Vec3;
 
