@@ -115,7 +115,7 @@ impl From<RenderServiceError> for ApiError {
     }
 }
 
-/// Query parameters (strings, parsed by [`Params::parse`] for precise messages). In the
+/// Query parameters (strings, parsed by `Params::parse` for precise messages). In the
 /// OpenAPI document each route lists the ones it takes ([`ImageQuery`], [`BuffersQuery`],
 /// [`CalloutsQuery`]); the others answer 400 there.
 #[derive(Debug, Default, Deserialize, IntoParams)]

@@ -12,7 +12,7 @@
 //!   clicked pixel `[x, y]` of the point tool; `part_id` a part to edit (its vertex set is the
 //!   base of add/subtract, and confirming updates it); `base` a previous draft of the same
 //!   user to build on instead (several strokes before confirming); `params` the energy's
-//!   weights ([`EnergyParams`]); `pixel_error` the cut's threshold (default 1 px);
+//!   weights ([`EnergyParams`](meshwiki_engine::select::EnergyParams)); `pixel_error` the cut's threshold (default 1 px);
 //! * `mask`: the stroke mask, a PNG of the camera's size whose grey levels are labels:
 //!   0 none, 1 foreground, 2 background, 3 heavy band, 4 lasso inside
 //!   ([`meshwiki_engine::select::mask`]). The point and segment tools need no mask (the

@@ -10,7 +10,7 @@
 //!    unassigned triangle; a neighbour joins while its normal stays within 60° of the chart's
 //!    area-weighted mean normal (70° for triangles no larger than a texel or so). A chart is
 //!    projected orthogonally onto the plane of that normal (every triangle keeps its
-//!    orientation, so nothing folds) and turned to its principal axes for a tight rectangle. A chart of fewer than [`SMALL_CHART_TEXELS`]
+//!    orientation, so nothing folds) and turned to its principal axes for a tight rectangle. A chart of fewer than `SMALL_CHART_TEXELS`
 //!    texels then joins the neighbouring chart it shares most edges with, where it can be
 //!    projected along that chart's axis (within 75°).
 //! 2. **Packing**: rectangles with a gutter of [`GUTTER`] texels on every side, tallest first

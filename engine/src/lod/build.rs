@@ -1,10 +1,10 @@
 //! The out-of-core build of a model's patch DAG (system paper §3.1–3.2, made better):
 //!
-//! 1. **Ingest** the streamed scan into flat vertex arrays and a face file ([`super::ingest`]).
-//! 2. **Bucket** faces spatially into pieces that fit the memory budget ([`super::buckets`]).
+//! 1. **Ingest** the streamed scan into flat vertex arrays and a face file (`super::ingest`).
+//! 2. **Bucket** faces spatially into pieces that fit the memory budget (`super::buckets`).
 //! 3. **Leaves**: partition each bucket into patches of ≤ N triangles that follow features
 //!    ([`super::partition`]), in parallel.
-//! 4. **Levels**: group neighbouring patches ([`super::grouping`]), simplify each group with its
+//! 4. **Levels**: group neighbouring patches (`super::grouping`), simplify each group with its
 //!    outer border locked and split it again ([`super::simplify`]), until a handful of patches
 //!    remain. Groups are re-formed at every level so locked borders become interior later.
 //! 5. **Write** the tables and compressed patches in locality order ([`super::format`]).

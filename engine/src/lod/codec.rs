@@ -1058,7 +1058,7 @@ fn unframe(blob: &[u8], max_payload: usize) -> Result<Framed<'_>, CodecError> {
     })
 }
 
-/// Splits a blob into its parts without decoding its streams (the framing of [`unframe`], as
+/// Splits a blob into its parts without decoding its streams (the framing of `unframe`, as
 /// [`decode_limited`] reads it).
 pub fn blob_bytes(blob: &[u8]) -> Result<(BlobBytes, Vec<u8>), CodecError> {
     let framed = unframe(blob, 64 << 20)?;

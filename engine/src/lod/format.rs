@@ -8,8 +8,9 @@
 //! [Patch blobs, in node-table order (locality order: coarse levels first, Morton order
 //!  within a level), each with its own CRC-32 in its node record]
 //! ```
-//! The layout of every record and of a patch blob is documented in `docs/FORMAT.md`;
-//! the DAG semantics (system paper §3.2, with Nanite-style groups) are in [`super::dag`].
+//! The layout of every record and of a patch blob is documented in `docs/FORMAT.md`, and so
+//! are the DAG semantics (system paper §3.2, with Nanite-style groups); `super::build` makes
+//! them.
 
 use bytemuck::{Pod, Zeroable};
 use memmap2::Mmap;

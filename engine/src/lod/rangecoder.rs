@@ -24,7 +24,7 @@ const PROB_ONE: u32 = 1 << PROB_BITS;
 const MAX_RATE: u8 = 5;
 
 /// An adaptive bit probability. It adapts by a shift that grows with the bits seen (3 for
-/// the first, then 4 from the third bit, up to [`MAX_RATE`]), learning fast while little is
+/// the first, then 4 from the third bit, up to `MAX_RATE`), learning fast while little is
 /// known and then tracking, as AV1's and Daala's adaptive CDFs do: a patch codes only a few
 /// thousand values per channel, so how fast a probability is learnt matters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

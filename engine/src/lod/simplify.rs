@@ -13,7 +13,7 @@
 //! join the same pair of shared vertices), the result is checked for edges used more than
 //! twice and repeated triangles the input lacked, faces folded onto each other are dropped,
 //! and any other defect gets its neighbourhood locked and the group simplified again
-//! ([`sound_simplification`]).
+//! (`sound_simplification`).
 
 use super::hausdorff::simplification_distance;
 use super::partition::{Triangles, partition};

@@ -497,14 +497,14 @@ fn candidates(
 
 /// Places labels (system paper §2.2) in a `width`×`height` image: greedily, in the order of
 /// `items` (their priority), each label at the cheapest of its candidates (see
-/// [`candidates`]: around the anchor at growing distances, then along the image sides) that
+/// `candidates`: around the anchor at growing distances, then along the image sides) that
 /// lies at least `margin` inside the image and at least `margin` away from every label placed
 /// before. The cost is the leader's length (anchor to the label's nearest point), plus
-/// [`SIDE_COST`] along the sides, [`CROSS_LEADER_PENALTY`] for each placed leader the leader
-/// crosses, [`CROSS_LABEL_PENALTY`] for each placed label the leader crosses and each placed
-/// leader the label crosses, [`ANCHOR_PENALTY`] for each other item's anchor the label covers,
+/// `SIDE_COST` along the sides, `CROSS_LEADER_PENALTY` for each placed leader the leader
+/// crosses, `CROSS_LABEL_PENALTY` for each placed label the leader crosses and each placed
+/// leader the label crosses, `ANCHOR_PENALTY` for each other item's anchor the label covers,
 /// and, with a `cover` depth buffer (row-major, `width`×`height`, finite on the model),
-/// [`COVER_PENALTY`] times the share of the label hiding the model rather than the background.
+/// `COVER_PENALTY` times the share of the label hiding the model rather than the background.
 /// The first candidate of strictly lowest cost wins. `None` where no candidate is free.
 ///
 /// The browser's overlay runs the same rule (`static/js/parts/place.js`, `placeLabels`,

@@ -76,7 +76,7 @@ fn merge_fit(memory_budget: usize) -> usize {
 impl Collector {
     /// A collector for `vertices` original vertices and `buckets` buckets, its scratch file
     /// in `scratch`, the merge's working set within a quarter of `memory_budget` bytes (at
-    /// most [`MERGE_BYTES`]).
+    /// most `MERGE_BYTES`).
     pub fn new(
         scratch: &Path,
         vertices: usize,

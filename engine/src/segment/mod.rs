@@ -7,7 +7,7 @@
 //! - [`grow`]: fine segments of one bucket by region growing (eq. 1);
 //! - [`merge`]: the coarser scales by hierarchical merging;
 //! - [`collect`]: both during the build, joined across buckets;
-//! - [`file`]: the `.mwseg` file.
+//! - [`file`](mod@file): the `.mwseg` file.
 
 pub mod collect;
 pub mod file;

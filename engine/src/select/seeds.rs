@@ -90,8 +90,8 @@ const FORWARD: [(isize, isize); 4] = [(1, 0), (-1, 1), (0, 1), (1, 1)];
 /// computed once per view and shared by the foreground and background searches. A step
 /// costs its length in pixels (1 or √2) times `1 + CREASE_COST · c`, where
 /// `c = max(1 − g(E), 1 − g(D_ij))` is how much of a geometric edge lies between the two
-/// pixels: `E` is the larger normal change across either pixel measured at [`CREASE_SCALE`]
-/// pixels ([`normal_edges`]), `D_ij` their relative depth difference, and `g(x) = exp(−β x²)`
+/// pixels: `E` is the larger normal change across either pixel measured at `CREASE_SCALE`
+/// pixels (`normal_edges`), `D_ij` their relative depth difference, and `g(x) = exp(−β x²)`
 /// with the contrast normalisation of the smoothness term (eq. 4,
 /// [`super::energy::Smoothness`]), so a crease is measured against the view's own typical
 /// change. Steps to or from an uncovered pixel are `INFINITY`.
