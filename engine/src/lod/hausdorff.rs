@@ -190,20 +190,22 @@ impl<'a> TriangleGrid<'a> {
         };
         let mut best_sq = f32::MAX;
         let mut best = u32::MAX;
-        let tries = std::iter::once(*near).chain(candidates);
-        for t in tries {
-            if t as usize >= self.boxes.len() {
-                continue;
-            }
+        // Tests triangle `t`, keeping the nearest; true when it is within the floor (the
+        // search is over).
+        let consider = |t: u32, best_sq: &mut f32, best: &mut u32| {
             let [a, b, c] = corners(t);
             let d = point_triangle_distance_sq(p, a, b, c);
-            if d < best_sq {
-                best_sq = d;
-                best = t;
-                if d <= floor_sq {
-                    *near = t;
-                    return d.sqrt();
-                }
+            if d < *best_sq {
+                *best_sq = d;
+                *best = t;
+                return d <= floor_sq;
+            }
+            false
+        };
+        for t in std::iter::once(*near).chain(candidates) {
+            if (t as usize) < self.boxes.len() && consider(t, &mut best_sq, &mut best) {
+                *near = best;
+                return best_sq.sqrt();
             }
         }
         let home = self.cell_of(p);
@@ -240,15 +242,9 @@ impl<'a> TriangleGrid<'a> {
                     if (lo - p).max(p - hi).max(Vec3::ZERO).length_squared() >= best_sq {
                         continue;
                     }
-                    let [a, b, cc] = corners(t);
-                    let d = point_triangle_distance_sq(p, a, b, cc);
-                    if d < best_sq {
-                        best_sq = d;
-                        best = t;
-                        if d <= floor_sq {
-                            within = true;
-                            return;
-                        }
+                    if consider(t, &mut best_sq, &mut best) {
+                        within = true;
+                        return;
                     }
                 }
             });
