@@ -51,7 +51,11 @@ fn api_of(
         }
         Some(p).filter(|p| p.as_object().is_some_and(|o| !o.is_empty()))
     };
-    let pixels_only = || with(serde_json::json!({"w_seg": 0.0, "w_seg_out": 0.0, "seg_edge": 1.0}));
+    let pixels_only = || {
+        with(
+            serde_json::json!({"w_seg": 0.0, "w_seg_out": 0.0, "w_seg_apart": 0.0, "seg_edge": 1.0}),
+        )
+    };
     match name {
         "heavy_lasso" => ("heavy_lasso", with(serde_json::json!({}))),
         "markup" => ("markup", with(serde_json::json!({}))),

@@ -70,6 +70,10 @@ pub struct EnergyParams {
     /// a stroke leans to the background (markup selects what its strokes claim, it does not
     /// spread over the surface no stroke speaks for). 0 disables it.
     pub w_seg_out: f32,
+    /// Markup on models with surface segments: how much more a pixel leans to the background
+    /// when its stroke-free segment shows more of the view than all the foreground strokes
+    /// claim — another part no stroke spoke for ([`super::segments`]). 0 disables it.
+    pub w_seg_apart: f32,
     /// Models with surface segments: factor of the smoothness term between pixels of
     /// different stroke segments (1: segment boundaries are no cheaper to cut than anywhere
     /// else; towards 0: the cut follows them).
@@ -89,6 +93,7 @@ impl Default for EnergyParams {
             markup_lambda: 6.0,
             w_seg: 2.0,
             w_seg_out: 1.0,
+            w_seg_apart: 4.0,
             seg_edge: 0.5,
         }
     }
@@ -110,6 +115,7 @@ impl EnergyParams {
             ("markup_lambda", self.markup_lambda),
             ("w_seg", self.w_seg),
             ("w_seg_out", self.w_seg_out),
+            ("w_seg_apart", self.w_seg_apart),
             ("seg_edge", self.seg_edge),
         ];
         for (name, v) in w {

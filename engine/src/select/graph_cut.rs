@@ -139,7 +139,12 @@ pub fn graph_cut_with(
                         match p.side[g] {
                             1 => cb += params.w_seg,
                             -1 => cf += params.w_seg,
-                            _ if seeds.stroke_position.is_some() => cf += params.w_seg_out,
+                            _ if seeds.stroke_position.is_some() => {
+                                cf += params.w_seg_out;
+                                if p.apart[g] {
+                                    cf += params.w_seg_apart;
+                                }
+                            }
                             _ => {}
                         }
                     }

@@ -17,7 +17,15 @@
 //!   strokes, instead of leaking across a smooth join;
 //! - **cheap cuts on segment boundaries**: between two pixels of different stroke segments
 //!   the smoothness term is multiplied by `seg_edge` (< 1), so the cut snaps to them; the
-//!   pixel graph still refines the boundary where the image says otherwise.
+//!   pixel graph still refines the boundary where the image says otherwise;
+//! - for markup, **surface apart from the claim**: an unclaimed segment (the largest
+//!   stroke-free one) that shows more pixels than all the foreground claims together leans
+//!   to the background by `w_seg_apart` more. Markup's geodesic term gives any surface to
+//!   the nearer side's strokes, so with few background strokes a whole torso went to a
+//!   foreground stroke on a leg, only because the one background stroke lay on another leg.
+//!   A piece of surface larger than everything the foreground strokes claim is another part
+//!   that no stroke spoke for, not the rest of the claimed one (which shows as the smaller,
+//!   stroke-free siblings of the claim, and still goes to the nearer side).
 //!
 //! The seeds' foreground and background pixels are the strokes: markup's strokes, and the
 //! heavy lasso's inner and outer sides.
@@ -93,6 +101,9 @@ pub struct SegmentPrior {
     /// Per pixel, the stroke segment (or the largest stroke-free segment) it lies in, as
     /// `scale << 32 | segment`; `u64::MAX` where none.
     pub region: Vec<u64>,
+    /// Per pixel: in no claimed segment, and in a stroke-free segment that shows more pixels
+    /// than the foreground claims ([`StrokeClaims::of`]).
+    pub apart: Vec<bool>,
 }
 
 /// What the strokes claim (the first half of [`stroke_segments`]): per `scale << 32 | segment`
@@ -104,6 +115,8 @@ pub struct SegmentPrior {
 pub struct StrokeClaims {
     claimed: FxHashMap<u64, i8>,
     touched: rustc_hash::FxHashSet<u64>,
+    /// Stroke-free segments showing more pixels than the foreground claims.
+    apart: rustc_hash::FxHashSet<u64>,
 }
 
 fn key(s: usize, seg: u32) -> u64 {
@@ -113,7 +126,8 @@ fn key(s: usize, seg: u32) -> u64 {
 impl StrokeClaims {
     /// The segments claimed by the seeds' foreground and background pixels: from each fine
     /// segment with strokes, up through the segments of its side only, the one with the
-    /// strongest boundary (the larger on a tie).
+    /// strongest boundary (the larger on a tie). Then the stroke-free segments that show
+    /// more of the view's pixels (those not [`OFF`]) than all the foreground claims.
     pub fn of(view: &ViewSegments, seeds: &Seeds) -> StrokeClaims {
         let n = view.local.len();
         let scales = view.ladders.first().map_or(0, Vec::len);
@@ -166,20 +180,40 @@ impl StrokeClaims {
                 claimed.insert(k, side);
             }
         }
-        StrokeClaims {
+        let mut claims = StrokeClaims {
             claimed,
             touched: count.into_keys().collect(),
+            apart: Default::default(),
+        };
+        // Pixels per local fine segment, then per decision.
+        let mut pixels = vec![0u64; view.ladders.len()];
+        for (i, &l) in view.local.iter().enumerate() {
+            if l != NONE && seeds.role.get(i) != Some(&OFF) {
+                pixels[l as usize] += 1;
+            }
         }
+        let mut claimed_fg = 0u64;
+        let mut free: FxHashMap<u64, u64> = FxHashMap::default();
+        for (l, (side, region)) in claims.decide(view).into_iter().enumerate() {
+            match side {
+                1 => claimed_fg += pixels[l],
+                0 if region != u64::MAX => *free.entry(region).or_default() += pixels[l],
+                _ => {}
+            }
+        }
+        claims.apart = free
+            .into_iter()
+            .filter(|&(_, n)| n > claimed_fg)
+            .map(|(k, _)| k)
+            .collect();
+        claims
     }
 
-    /// The prior of `view`'s pixels (`role`: the seeds' roles, [`OFF`] pixels get none): per
-    /// local fine segment, its claimed segment, or else its largest segment without strokes
-    /// (for the boundaries).
-    pub fn prior(&self, view: &ViewSegments, role: &[u8]) -> SegmentPrior {
-        let n = view.local.len();
+    /// Per local fine segment: the side and key of its claimed segment, or 0 and its largest
+    /// stroke-free segment (`u64::MAX` if none).
+    fn decide(&self, view: &ViewSegments) -> Vec<(i8, u64)> {
         let scales = view.ladders.first().map_or(0, Vec::len);
-        let decided: Vec<(i8, u64)> = view
-            .ladders
+        view.ladders
             .iter()
             .map(|ladder| {
                 let mut free = u64::MAX;
@@ -196,17 +230,31 @@ impl StrokeClaims {
                 }
                 (0, free)
             })
-            .collect();
+            .collect()
+    }
+
+    /// The prior of `view`'s pixels (`role`: the seeds' roles, [`OFF`] pixels get none): per
+    /// local fine segment, its claimed segment, or else its largest segment without strokes
+    /// (for the boundaries) and whether that one is apart from the claims.
+    pub fn prior(&self, view: &ViewSegments, role: &[u8]) -> SegmentPrior {
+        let n = view.local.len();
+        let decided = self.decide(view);
         let mut side = vec![0i8; n];
         let mut region = vec![u64::MAX; n];
+        let mut apart = vec![false; n];
         for i in 0..n {
             let l = view.local[i];
             if l == NONE || role.get(i) == Some(&OFF) {
                 continue;
             }
             (side[i], region[i]) = decided[l as usize];
+            apart[i] = side[i] == 0 && self.apart.contains(&region[i]);
         }
-        SegmentPrior { side, region }
+        SegmentPrior {
+            side,
+            region,
+            apart,
+        }
     }
 }
 
@@ -263,6 +311,54 @@ mod tests {
         assert_eq!(p.region[0], 1 << 32);
         assert_eq!(p.region[5], 1 << 32);
         assert_eq!(p.region[6], (1 << 32) | 1);
+    }
+
+    #[test]
+    fn stroke_free_segments_larger_than_the_foreground_claim_are_apart() {
+        // 20 × 1: fine segments A (3 px, a foreground stroke), B (2 px), C (10 px), D (5 px,
+        // a background stroke). A and B merge at scale 1, everything at scale 2; A's own
+        // boundary is the strongest, so the stroke claims A alone.
+        let sizes = [3, 2, 10, 5];
+        let local: Vec<u32> = (0..4u32)
+            .flat_map(|l| std::iter::repeat_n(l, sizes[l as usize]))
+            .collect();
+        let view = ViewSegments {
+            width: 20,
+            height: 1,
+            local,
+            ladders: vec![
+                vec![10, 0, 0],
+                vec![11, 0, 0],
+                vec![12, 1, 0],
+                vec![13, 2, 0],
+            ],
+            strengths: vec![
+                vec![1.0, 0.1, f32::INFINITY],
+                vec![0.1, 0.1, f32::INFINITY],
+                vec![0.1, 0.1, f32::INFINITY],
+                vec![0.1, 0.1, f32::INFINITY],
+            ],
+        };
+        let mut role = vec![UNKNOWN; 20];
+        role[1] = FG;
+        role[17] = BG;
+        let p = stroke_segments(&view, &seeds(role.clone()));
+        assert_eq!(&p.side[..3], &[1; 3]);
+        assert_eq!(p.region[0], 10);
+        // B (its own stroke-free segment, 2 px) is smaller than the claim (3 px): not apart;
+        // C's largest stroke-free segment (scale 1, 10 px) is larger: apart.
+        assert_eq!(&p.side[3..15], &[0; 12]);
+        assert_eq!(&p.apart[3..5], &[false; 2]);
+        assert_eq!(p.region[5], (1 << 32) | 1);
+        assert_eq!(&p.apart[5..15], &[true; 10]);
+        // Claimed pixels are never apart.
+        assert!(p.apart[..3].iter().chain(&p.apart[15..]).all(|&a| !a));
+        // With C's pixels off the view, nothing is larger than the claim.
+        for r in &mut role[7..15] {
+            *r = OFF;
+        }
+        let p = stroke_segments(&view, &seeds(role));
+        assert!(p.apart.iter().all(|&a| !a));
     }
 
     #[test]
