@@ -117,7 +117,8 @@ pub struct SegmentPrior {
 pub struct StrokeClaims {
     claimed: FxHashMap<u64, i8>,
     touched: rustc_hash::FxHashSet<u64>,
-    /// Stroke-free segments showing more pixels than the foreground claims.
+    /// Stroke-free segments showing more pixels than the foreground claims (none when the
+    /// foreground strokes claim nothing).
     apart: rustc_hash::FxHashSet<u64>,
 }
 
@@ -205,7 +206,7 @@ impl StrokeClaims {
         }
         claims.apart = free
             .into_iter()
-            .filter(|&(_, n)| n > claimed_fg)
+            .filter(|&(_, n)| claimed_fg > 0 && n > claimed_fg)
             .map(|(k, _)| k)
             .collect();
         claims
@@ -360,6 +361,14 @@ mod tests {
             *r = OFF;
         }
         let p = stroke_segments(&view, &seeds(role));
+        assert!(p.apart.iter().all(|&a| !a));
+        // Strokes of both sides in one fine segment claim nothing: then nothing is apart
+        // either (there is no claim to be apart from).
+        let mut role = vec![UNKNOWN; 20];
+        role[16] = FG;
+        role[17] = BG;
+        let p = stroke_segments(&view, &seeds(role));
+        assert!(p.side.iter().all(|&s| s == 0));
         assert!(p.apart.iter().all(|&a| !a));
     }
 
