@@ -5,11 +5,13 @@
 //! Each pixel names an original vertex (the id buffer), hence its segment at every scale of
 //! the model's hierarchy ([`crate::segment`]). The strokes then claim whole segments: going
 //! up the hierarchy from each fine segment a stroke touches, through the segments that hold
-//! strokes of that side only, the stroke claims the one **whose boundary is strongest** (the
-//! most salient part: it was merged last relative to what it holds, see
-//! [`crate::segment::merge::Hierarchy::strengths`]) — not simply the largest, which with
-//! few strokes would be half the model. Segments no stroke claims stay undecided. These
-//! *stroke segments* act on the cut in two ways:
+//! strokes of that side only, the stroke claims a part **by the strength of its boundary**
+//! (its saliency: it was merged last relative to what it holds, see
+//! [`crate::segment::merge::Hierarchy::strengths`]): the largest of them whose boundary is
+//! at least half as strong as the strongest — not simply the largest, which with few
+//! strokes would be half the model, nor strictly the strongest, which took a piece of a
+//! part whenever noise made its boundary a little stronger than the part's. Segments no
+//! stroke claims stay undecided. These *stroke segments* act on the cut in two ways:
 //!
 //! - a **segment prior** in the data term: a pixel in a foreground stroke segment costs
 //!   `w_seg` more to put in the background, and the converse — so a stroke claims the
@@ -128,9 +130,10 @@ fn key(s: usize, seg: u32) -> u64 {
 
 impl StrokeClaims {
     /// The segments claimed by the seeds' foreground and background pixels: from each fine
-    /// segment with strokes, up through the segments of its side only, the one with the
-    /// strongest boundary (the larger on a tie). Then the stroke-free segments that show
-    /// more of the view's pixels (those not [`OFF`]) than all the foreground claims.
+    /// segment with strokes, up through the segments of its side only, the largest whose
+    /// boundary is at least half as strong as the strongest (`claim`). Then the
+    /// stroke-free segments that show more of the view's pixels (those not [`OFF`]) than all
+    /// the foreground claims.
     pub fn of(view: &ViewSegments, seeds: &Seeds) -> StrokeClaims {
         let n = view.local.len();
         let scales = view.ladders.first().map_or(0, Vec::len);
@@ -165,21 +168,23 @@ impl StrokeClaims {
                 continue;
             }
             let side: i8 = if f > 0 { 1 } else { -1 };
-            let mut best: Option<(f32, u64)> = None;
-            for (s, &seg) in ladder.iter().enumerate().take(scales) {
-                if seg == NONE {
-                    break;
-                }
-                let (f, b) = count.get(&key(s, seg)).copied().unwrap_or((0, 0));
-                if f > 0 && b > 0 {
-                    break;
-                }
-                let strength = view.strengths[l].get(s).copied().unwrap_or(f32::INFINITY);
-                if best.is_none_or(|(bs, _)| strength >= bs) {
-                    best = Some((strength, key(s, seg)));
-                }
-            }
-            if let Some((_, k)) = best {
+            // The segments above it holding strokes of this side only, fine to coarse.
+            let single: Vec<(f32, u64)> = ladder
+                .iter()
+                .enumerate()
+                .take(scales)
+                .take_while(|&(s, &seg)| {
+                    seg != NONE
+                        && count
+                            .get(&key(s, seg))
+                            .is_none_or(|&(f, b)| f == 0 || b == 0)
+                })
+                .map(|(s, &seg)| {
+                    let strength = view.strengths[l].get(s).copied().unwrap_or(f32::INFINITY);
+                    (strength, key(s, seg))
+                })
+                .collect();
+            if let Some(k) = claim(&single) {
                 claimed.insert(k, side);
             }
         }
@@ -259,6 +264,35 @@ impl StrokeClaims {
             apart,
         }
     }
+}
+
+/// Share of the strongest boundary that a larger segment's boundary must reach for the
+/// stroke to claim that larger segment instead ([`claim`]).
+const CLAIM_SHARE: f32 = 0.5;
+
+/// Which of a stroke's single-sided segments (`(strength, key)`, fine to coarse) it claims:
+/// the largest whose boundary is at least [`CLAIM_SHARE`] of the strongest one's. Strengths
+/// are persistences measured on the mesh, so two nested segments of one part often differ by
+/// less than their noise; taking strictly the strongest then claimed a piece of a part (the
+/// end of a teddy's arm without the rest of the arm) and left the rest to the background.
+/// A boundary under half the strongest is a weaker part boundary, not noise: the stroke
+/// keeps to the stronger part inside it. Without a finite positive maximum (a segment never
+/// merged, or persistences all ≤ 0), the strongest, the larger on a tie.
+fn claim(single: &[(f32, u64)]) -> Option<u64> {
+    let best = single
+        .iter()
+        .map(|&(strength, _)| strength)
+        .fold(f32::NEG_INFINITY, f32::max);
+    let threshold = if best.is_finite() && best > 0.0 {
+        best * CLAIM_SHARE
+    } else {
+        best
+    };
+    single
+        .iter()
+        .rev()
+        .find(|&&(strength, _)| strength >= threshold)
+        .map(|&(_, k)| k)
 }
 
 /// The largest segments holding strokes of one side only, from the seeds' foreground and
@@ -370,6 +404,31 @@ mod tests {
         let p = stroke_segments(&view, &seeds(role));
         assert!(p.side.iter().all(|&s| s == 0));
         assert!(p.apart.iter().all(|&a| !a));
+    }
+
+    #[test]
+    fn a_stroke_claims_the_largest_segment_nearly_as_salient_as_the_most() {
+        // Fine segment 0 (a foreground stroke) lies in scale-1 segment 0 with fine segment 1;
+        // scale 2 holds everything, with the background stroke in fine segment 3.
+        let claimed = |inner: f32, outer: f32| {
+            let mut view = view();
+            view.strengths = vec![vec![inner, outer, f32::INFINITY]; 4];
+            let mut role = vec![UNKNOWN; 12];
+            role[0] = FG;
+            role[11] = BG;
+            let p = stroke_segments(&view, &seeds(role));
+            p.side.iter().take_while(|&&s| s == 1).count()
+        };
+        // The pair's boundary at least half the fine segment's: the pair (6 pixels).
+        assert_eq!(claimed(1.0, 0.6), 6);
+        assert_eq!(claimed(1.0, 0.5), 6);
+        assert_eq!(claimed(0.6, 1.0), 6);
+        // Under half: the fine segment alone (3 pixels).
+        assert_eq!(claimed(1.0, 0.4), 3);
+        // Persistences at or below zero: the strongest, the larger on a tie.
+        assert_eq!(claimed(-0.2, -0.5), 3);
+        assert_eq!(claimed(-0.5, -0.5), 6);
+        assert_eq!(claim(&[]), None);
     }
 
     #[test]
