@@ -44,6 +44,18 @@ pub struct Args {
     /// Do not run Nexus' builder (the fixed reference figures are printed instead).
     #[arg(long)]
     pub no_nexus: bool,
+    /// Vertex order of the scan as built: `source` (as the file has it), or `morton` (a copy
+    /// renumbered by the Morton code of the positions, `vertex_order.rs`; Nexus builds the
+    /// same copy), to measure what the order costs the format.
+    #[arg(long, value_enum, default_value_t = VertexOrder::Source)]
+    pub vertex_order: VertexOrder,
+}
+
+/// The `--vertex-order` of `bench build`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum VertexOrder {
+    Source,
+    Morton,
 }
 
 /// One reference measurement of `nxsbuild`.
@@ -163,6 +175,20 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             path
         }
     };
+    let source = input.clone();
+    let input = match args.vertex_order {
+        VertexOrder::Source => input,
+        VertexOrder::Morton => {
+            let path = dir.join("morton.ply");
+            let t = std::time::Instant::now();
+            let n = crate::vertex_order::write_reordered(&input, &path)?;
+            eprintln!(
+                "vertices renumbered in Morton order: {n} vertices in {:.1} s (not timed)",
+                t.elapsed().as_secs_f64()
+            );
+            path
+        }
+    };
     let output = match &args.out {
         Some(p) => p.clone(),
         None => dir.join("bench.mwlod"),
@@ -176,10 +202,14 @@ fn bench(args: &Args) -> anyhow::Result<()> {
             .unwrap_or(BuildOptions::default().zstd_level),
         ..BuildOptions::default()
     };
-    let bytes = std::fs::metadata(&input).map(|m| m.len()).unwrap_or(0);
+    let bytes = std::fs::metadata(&source).map(|m| m.len()).unwrap_or(0);
     println!(
-        "bench build: {} ({:.1} MB), memory budget {:.0} MB, {} threads",
-        display(&input),
+        "bench build: {}{} ({:.1} MB), memory budget {:.0} MB, {} threads",
+        display(&source),
+        match args.vertex_order {
+            VertexOrder::Source => "",
+            VertexOrder::Morton => ", vertices in Morton order",
+        },
         bytes as f64 / 1e6,
         args.memory as f64 / 1e6,
         args.threads

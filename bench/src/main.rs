@@ -14,6 +14,7 @@ mod select;
 mod simplify;
 mod textures;
 mod untar;
+mod vertex_order;
 
 use std::path::PathBuf;
 
