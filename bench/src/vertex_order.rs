@@ -16,24 +16,11 @@
 use std::path::Path;
 
 use anyhow::{Context, bail};
+use meshwiki_engine::lod::build::{MORTON_BITS, morton3};
 use meshwiki_engine::mesh::{Format, load, write_ply};
 
-/// Bits per axis of the quantised positions (3 × 21 = 63 bits of code).
-const BITS: u32 = 21;
-
-/// Spreads the low 21 bits of `x` to every third bit (bit `i` to bit `3i`).
-fn spread(x: u64) -> u64 {
-    let mut x = x & 0x1f_ffff;
-    x = (x | x << 32) & 0x001f_0000_0000_ffff;
-    x = (x | x << 16) & 0x001f_0000_ff00_00ff;
-    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
-    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
-    x = (x | x << 2) & 0x1249_2492_4924_9249;
-    x
-}
-
-/// The Morton code of every position, quantised to [`BITS`] bits per axis over the bounding
-/// box's longest side.
+/// The Morton code ([`morton3`]) of every position, quantised to [`MORTON_BITS`] bits per
+/// axis over the bounding box's longest side.
 fn morton_codes(positions: &[[f32; 3]]) -> Vec<u64> {
     let mut lo = [f32::MAX; 3];
     let mut hi = [f32::MIN; 3];
@@ -45,15 +32,16 @@ fn morton_codes(positions: &[[f32; 3]]) -> Vec<u64> {
     }
     let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f32, f32::max);
     let scale = if extent > 0.0 {
-        ((1u64 << BITS) - 1) as f64 / extent as f64
+        ((1u64 << MORTON_BITS) - 1) as f64 / extent as f64
     } else {
         0.0
     };
     positions
         .iter()
         .map(|p| {
-            let q = |k: usize| ((p[k] - lo[k]) as f64 * scale) as u64;
-            spread(q(0)) | spread(q(1)) << 1 | spread(q(2)) << 2
+            morton3(std::array::from_fn(|k| {
+                ((p[k] - lo[k]) as f64 * scale) as u32
+            }))
         })
         .collect()
 }
@@ -81,18 +69,16 @@ pub fn write_reordered(input: &Path, output: &Path) -> anyhow::Result<usize> {
     for (new, &old) in order.iter().enumerate() {
         new_of[old as usize] = new as u32;
     }
-    let pick = |old: &u32| *old as usize;
-    let positions: Vec<[f32; 3]> = order.iter().map(|o| mesh.positions[pick(o)]).collect();
-    let colors: Vec<[u8; 4]> = if mesh.colors.is_empty() {
-        Vec::new()
-    } else {
-        order.iter().map(|o| mesh.colors[pick(o)]).collect()
-    };
-    let normals: Vec<[f32; 3]> = if mesh.normals.is_empty() {
-        Vec::new()
-    } else {
-        order.iter().map(|o| mesh.normals[pick(o)]).collect()
-    };
+    // Colours and normals are empty when the scan has none.
+    fn permuted<T: Copy>(values: &[T], order: &[u32]) -> Vec<T> {
+        if values.is_empty() {
+            return Vec::new();
+        }
+        order.iter().map(|&old| values[old as usize]).collect()
+    }
+    let positions = permuted(&mesh.positions, &order);
+    let colors = permuted(&mesh.colors, &order);
+    let normals = permuted(&mesh.normals, &order);
     let indices: Vec<u32> = mesh.indices.iter().map(|&i| new_of[i as usize]).collect();
     write_ply(
         output,
@@ -109,14 +95,6 @@ pub fn write_reordered(input: &Path, output: &Path) -> anyhow::Result<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn spread_interleaves_bits() {
-        for x in [0u64, 1, 2, 5, 0x1f_ffff, 0x15_5555] {
-            let naive = (0..BITS).fold(0u64, |r, b| r | ((x >> b) & 1) << (3 * b));
-            assert_eq!(spread(x), naive, "{x:#x}");
-        }
-    }
 
     #[test]
     fn morton_order_keeps_neighbours_together_and_is_a_permutation() {

@@ -1570,7 +1570,7 @@ fn locality_order(nodes: &[Node], lo: [f32; 3], hi: [f32; 3]) -> Vec<u32> {
     let scale: [f32; 3] = std::array::from_fn(|k| {
         let e = hi[k] - lo[k];
         if e > 0.0 {
-            ((1u32 << 21) - 1) as f32 / e
+            ((1u32 << MORTON_BITS) - 1) as f32 / e
         } else {
             0.0
         }
@@ -1580,7 +1580,8 @@ fn locality_order(nodes: &[Node], lo: [f32; 3], hi: [f32; 3]) -> Vec<u32> {
         .enumerate()
         .map(|(i, n)| {
             let q: [u32; 3] = std::array::from_fn(|k| {
-                ((n.bounds[k] - lo[k]) * scale[k]).clamp(0.0, ((1u32 << 21) - 1) as f32) as u32
+                ((n.bounds[k] - lo[k]) * scale[k]).clamp(0.0, ((1u32 << MORTON_BITS) - 1) as f32)
+                    as u32
             });
             (u32::MAX - n.level, morton3(q), i as u32)
         })
@@ -1589,7 +1590,10 @@ fn locality_order(nodes: &[Node], lo: [f32; 3], hi: [f32; 3]) -> Vec<u32> {
     keyed.into_iter().map(|k| k.2).collect()
 }
 
-fn morton3(q: [u32; 3]) -> u64 {
+/// The Morton code of a point quantised to [`MORTON_BITS`] bits per axis (higher bits are
+/// ignored): its coordinates' bits interleaved, x lowest, so points near each other get near
+/// codes (Morton, "A computer oriented geodetic data base", IBM 1966).
+pub fn morton3(q: [u32; 3]) -> u64 {
     fn spread(mut x: u64) -> u64 {
         x &= 0x1f_ffff;
         x = (x | x << 32) & 0x1f_0000_0000_ffff;
@@ -1602,10 +1606,40 @@ fn morton3(q: [u32; 3]) -> u64 {
     spread(q[0] as u64) | spread(q[1] as u64) << 1 | spread(q[2] as u64) << 2
 }
 
+/// Bits per axis of [`morton3`] (3 × 21 = 63 bits of code).
+pub const MORTON_BITS: u32 = 21;
+
 /// Peak resident set size of this process (Linux `VmHWM`).
 pub fn peak_rss_bytes() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
+}
+
+#[cfg(test)]
+mod morton_tests {
+    use super::*;
+
+    #[test]
+    fn morton3_interleaves_the_bits_of_the_three_axes() {
+        let naive = |q: [u32; 3]| {
+            (0..MORTON_BITS).fold(0u64, |r, b| {
+                (0..3).fold(r, |r, k| r | ((q[k] as u64 >> b) & 1) << (3 * b + k as u32))
+            })
+        };
+        for q in [
+            [0, 0, 0],
+            [1, 0, 0],
+            [0, 1, 0],
+            [0, 0, 1],
+            [5, 2, 7],
+            [0x1f_ffff, 0, 0x15_5555],
+            [0x1f_ffff; 3],
+        ] {
+            assert_eq!(morton3(q), naive(q), "{q:?}");
+        }
+        // Bits above the 21st are ignored.
+        assert_eq!(morton3([1 << 21 | 3, 0, 0]), morton3([3, 0, 0]));
+    }
 }
