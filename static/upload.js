@@ -20,6 +20,8 @@
     var build = {};
     var simplifier = form.querySelector("[name=simplifier]");
     if (simplifier && simplifier.value) build.simplifier = simplifier.value;
+    var vertexOrder = form.querySelector("[name=vertex_order]");
+    if (vertexOrder && vertexOrder.value) build.vertex_order = vertexOrder.value;
     ["patch_triangles", "texture_quality", "texture_spread"].forEach(function (name) {
       var input = form.querySelector("[name=" + name + "]");
       if (input && input.value.trim() !== "") build[name] = Number(input.value);

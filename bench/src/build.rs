@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 use meshwiki::jobs::{Source, parse_size, run_build};
-use meshwiki_engine::lod::BuildOptions;
+use meshwiki_engine::lod::{BuildOptions, VertexOrder};
 use meshwiki_engine::mesh::write_relief_ply;
 
 use meshwiki::terminal::{Bar, check_input, print_summary};
@@ -44,18 +44,11 @@ pub struct Args {
     /// Do not run Nexus' builder (the fixed reference figures are printed instead).
     #[arg(long)]
     pub no_nexus: bool,
-    /// Vertex order of the scan as built: `source` (as the file has it), or `morton` (a copy
-    /// renumbered by the Morton code of the positions, `vertex_order.rs`; Nexus builds the
-    /// same copy), to measure what the order costs the format.
-    #[arg(long, value_enum, default_value_t = VertexOrder::Source)]
+    /// How the build numbers the scan's vertices: `morton` (the product's default, by the
+    /// Morton code of their positions) or `source` (as the file lists them), to measure what
+    /// the order costs the format.
+    #[arg(long, default_value_t = VertexOrder::Morton)]
     pub vertex_order: VertexOrder,
-}
-
-/// The `--vertex-order` of `bench build`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum VertexOrder {
-    Source,
-    Morton,
 }
 
 /// One reference measurement of `nxsbuild`.
@@ -176,19 +169,6 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         }
     };
     let source = input.clone();
-    let input = match args.vertex_order {
-        VertexOrder::Source => input,
-        VertexOrder::Morton => {
-            let path = dir.join("morton.ply");
-            let t = std::time::Instant::now();
-            let n = crate::vertex_order::write_reordered(&input, &path)?;
-            eprintln!(
-                "vertices renumbered in Morton order: {n} vertices in {:.1} s (not timed)",
-                t.elapsed().as_secs_f64()
-            );
-            path
-        }
-    };
     let output = match &args.out {
         Some(p) => p.clone(),
         None => dir.join("bench.mwlod"),
@@ -200,6 +180,7 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         zstd_level: args
             .zstd_level
             .unwrap_or(BuildOptions::default().zstd_level),
+        vertex_order: args.vertex_order,
         ..BuildOptions::default()
     };
     let bytes = std::fs::metadata(&source).map(|m| m.len()).unwrap_or(0);
@@ -207,8 +188,8 @@ fn bench(args: &Args) -> anyhow::Result<()> {
         "bench build: {}{} ({:.1} MB), memory budget {:.0} MB, {} threads",
         display(&source),
         match args.vertex_order {
-            VertexOrder::Source => "",
-            VertexOrder::Morton => ", vertices in Morton order",
+            VertexOrder::Source => ", vertices in the file's order",
+            VertexOrder::Morton => "",
         },
         bytes as f64 / 1e6,
         args.memory as f64 / 1e6,

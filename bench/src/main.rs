@@ -14,7 +14,6 @@ mod select;
 mod simplify;
 mod textures;
 mod untar;
-mod vertex_order;
 
 use std::path::PathBuf;
 

@@ -62,6 +62,7 @@ fn build(scan: &str, out: &Path, density: Option<f32>) -> Result<lod::BuildRepor
     let options = BuildOptions {
         normal_maps: density.is_some(),
         normal_map_density: density.unwrap_or(1.0),
+        vertex_order: lod::VertexOrder::Morton,
         ..BuildOptions::default()
     };
     let report = if let Some(n) = scan.strip_prefix("synth:") {

@@ -23,6 +23,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
+use meshwiki_engine::lod::VertexOrder;
 use meshwiki_engine::lod::atlas::encode_jpeg;
 use meshwiki_engine::lod::build::{BuildOptions, BuildReport, TextureBytes, TextureReport};
 use meshwiki_engine::mesh::{self, MeshSink, Relief};
@@ -122,6 +123,7 @@ fn build(scan: &Source, dir: &Path, quality: u8, spread: u8) -> Result<Measured>
         texture_quality: quality,
         texture_spread: spread,
         measure_textures: true,
+        vertex_order: VertexOrder::Morton,
         ..BuildOptions::default()
     };
     let t = Instant::now();
@@ -252,6 +254,7 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
     let out = dir.join("throughput.mwlod");
     let options = BuildOptions {
         texture_quality: args.quality,
+        vertex_order: VertexOrder::Morton,
         ..BuildOptions::default()
     };
     let mut rows = Vec::new();

@@ -7,6 +7,7 @@
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
 use meshwiki_engine::lod::segsimplify::Simplifier;
+use meshwiki_engine::lod::vertex_order::{self, VertexOrder};
 use meshwiki_engine::lod::{self, BuildOptions, Culling, LodFile, NO_GROUP};
 use meshwiki_engine::mesh::Mesh;
 use meshwiki_engine::progress::NoProgress;
@@ -316,20 +317,36 @@ fn check_sparse(file: &LodFile) {
 }
 
 fn build_and_check(name: &str, mesh: &Mesh, max_tris: usize) {
-    build_and_check_with(name, mesh, max_tris, Simplifier::Quadric);
+    build_and_check_with(
+        name,
+        mesh,
+        max_tris,
+        Simplifier::Quadric,
+        VertexOrder::Morton,
+    );
 }
 
-fn build_and_check_with(name: &str, mesh: &Mesh, max_tris: usize, simplifier: Simplifier) {
+fn build_and_check_with(
+    name: &str,
+    mesh: &Mesh,
+    max_tris: usize,
+    simplifier: Simplifier,
+    order: VertexOrder,
+) {
     let out = temp(name);
     let options = BuildOptions {
         max_patch_triangles: max_tris,
         memory_budget: 256 << 20,
         simplifier,
+        vertex_order: order,
         ..Default::default()
     };
     let report = lod::build_mesh(mesh, &out, &options, &NoProgress).expect("build");
     assert_eq!(report.import.triangles, mesh.triangle_count() as u64);
     let file = LodFile::open(&out).expect("open");
+    // Ids number the vertices in the order asked for: compare with the mesh so numbered.
+    assert_eq!(file.vertex_order(), order);
+    let mesh = &vertex_order::as_built(mesh, order, &file.grid());
     let tris: Vec<[u32; 3]> = mesh.indices.chunks(3).map(|t| [t[0], t[1], t[2]]).collect();
     check_structure(&file, max_tris as u32, boundary(&tris).len(), simplifier);
     check_cuts(&file, mesh);
@@ -372,9 +389,42 @@ fn closed_multi_component_meshes_cut_without_cracks() {
 #[test]
 fn the_segment_driven_simplifier_builds_crack_free_hierarchies_too() {
     let mesh = terrain(74, 2, 4);
-    build_and_check_with("segterrain", &mesh, 192, Simplifier::Segments);
+    build_and_check_with(
+        "segterrain",
+        &mesh,
+        192,
+        Simplifier::Segments,
+        VertexOrder::Morton,
+    );
     let mesh = blobs(50, 1);
-    build_and_check_with("segblobs", &mesh, 256, Simplifier::Segments);
+    build_and_check_with(
+        "segblobs",
+        &mesh,
+        256,
+        Simplifier::Segments,
+        VertexOrder::Morton,
+    );
+}
+
+#[test]
+fn the_files_own_vertex_order_is_kept_when_asked_for() {
+    // Ids are then the file's vertex indices: the same checks against the mesh as it is.
+    let mesh = terrain(67, 1, 3);
+    build_and_check_with(
+        "srcterrain",
+        &mesh,
+        192,
+        Simplifier::Quadric,
+        VertexOrder::Source,
+    );
+    let mesh = blobs(50, 2);
+    build_and_check_with(
+        "srcblobs",
+        &mesh,
+        256,
+        Simplifier::Quadric,
+        VertexOrder::Source,
+    );
 }
 
 #[test]

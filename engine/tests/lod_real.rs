@@ -221,9 +221,15 @@ fn check_scan(name: &str, per_side: usize) {
     let dir = std::env::temp_dir().join(format!("mw-lodreal-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let out = dir.join("scan.mwlod");
-    let report =
-        lod::build_file(&path, &out, &BuildOptions::default(), &NoProgress).expect("build");
+    // In the server's vertex order (Morton): the checks below run on the scan so numbered.
+    let options = BuildOptions {
+        vertex_order: lod::VertexOrder::Morton,
+        ..BuildOptions::default()
+    };
+    let report = lod::build_file(&path, &out, &options, &NoProgress).expect("build");
     let file = LodFile::open(&out).expect("open");
+    // The scan as the build numbered it (the default Morton order): ids index it.
+    let input = lod::vertex_order::as_built(&input, file.vertex_order(), &file.grid());
 
     let roots = file
         .nodes()

@@ -5,6 +5,7 @@
 
 use std::time::Duration;
 
+use meshwiki_engine::lod::VertexOrder;
 use meshwiki_engine::lod::segsimplify::Simplifier;
 use serde::Deserialize;
 use utoipa::ToSchema;
@@ -40,6 +41,11 @@ pub struct BuildChoices {
     /// cost more bytes than the finer geometry for the same image; `meshwiki-bench normals`).
     #[serde(default)]
     pub normal_maps: Option<bool>,
+    /// How the model's vertices are numbered: `morton` (the default: by the Morton code of
+    /// their positions, smaller files) or `source` (ids are the scan file's vertex indices,
+    /// for tools that relate parts to the file).
+    #[serde(default)]
+    pub vertex_order: Option<VertexOrder>,
 }
 
 /// Smallest patch triangle budget an upload may ask for.
@@ -79,6 +85,7 @@ impl BuildChoices {
             texture_quality: self.texture_quality,
             texture_spread: self.texture_spread,
             normal_maps: self.normal_maps,
+            vertex_order: self.vertex_order,
             ..JobOptions::default()
         })
     }

@@ -16,6 +16,7 @@ use meshwiki::store::jobs::{self, JobKind, JobOptions, NewJob};
 use meshwiki::store::models::NewModel;
 use meshwiki::store::users::{self, Role, User};
 use meshwiki::terminal::{Bar, check_input, print_summary};
+use meshwiki_engine::lod::VertexOrder;
 use meshwiki_engine::lod::segsimplify::Simplifier;
 
 use super::DataDirArgs;
@@ -57,6 +58,10 @@ pub struct Args {
     /// they cost and bring).
     #[arg(long)]
     pub normal_maps: bool,
+    /// How the model's vertices are numbered: `morton` (the default: by the Morton code of
+    /// their positions, smaller files) or `source` (ids are the file's vertex indices).
+    #[arg(long)]
+    pub vertex_order: Option<VertexOrder>,
     /// Account that owns the model (default: the first admin).
     #[arg(long)]
     pub owner: Option<String>,
@@ -125,6 +130,7 @@ async fn import(db: &Db, settings: Settings, args: &Args, bytes: u64) -> anyhow:
             texture_quality: args.texture_quality,
             texture_spread: args.texture_spread,
             normal_maps: args.normal_maps.then_some(true),
+            vertex_order: args.vertex_order,
             ..JobOptions::default()
         },
         running_pid: Some(std::process::id() as i64),

@@ -11,7 +11,7 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
-use meshwiki_engine::lod::{self, BuildOptions, LodFile};
+use meshwiki_engine::lod::{self, BuildOptions, LodFile, VertexOrder};
 use meshwiki_engine::progress::NoProgress;
 use serde::Deserialize;
 use serde_json::json;
@@ -61,6 +61,10 @@ pub struct BuildArgs {
     /// Bake a normal map into every coarse patch.
     #[arg(long)]
     pub normal_maps: bool,
+    /// How the vertices are numbered: `morton` (the default) or `source` (ids are the
+    /// file's vertex indices).
+    #[arg(long, default_value_t = VertexOrder::Morton)]
+    pub vertex_order: VertexOrder,
 }
 
 /// Arguments of `lod dump`.
@@ -85,6 +89,7 @@ pub fn run(command: LodCommand) -> anyhow::Result<()> {
                 &args.output,
                 &BuildOptions {
                     normal_maps: args.normal_maps,
+                    vertex_order: args.vertex_order,
                     ..BuildOptions::default()
                 },
                 &NoProgress,
@@ -180,6 +185,7 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
         "has_normals": file.has_normals(),
         "has_texture": file.has_texture(),
         "has_normal_maps": file.has_normal_maps(),
+        "vertex_order": file.vertex_order().as_str(),
         "patches": patches,
     });
     let text = serde_json::to_string(&out)?;

@@ -27,7 +27,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use meshwiki_engine::lod::{BuildError, BuildOptions, BuildReport, LodFile, build_from};
+use meshwiki_engine::lod::{
+    BuildError, BuildOptions, BuildReport, LodFile, VertexOrder, build_from,
+};
 use meshwiki_engine::mesh::{
     ImportError, ImportErrorKind, MeshSink, SourceInfo, SourceTexture, TexturedFace, VertexBatch,
     synth,
@@ -720,6 +722,8 @@ impl Jobs {
                 .texture_spread
                 .map_or(d.texture_spread, |s| s.min(100)),
             normal_maps: job.options.normal_maps.unwrap_or(d.normal_maps),
+            // Morton unless asked: smaller files (docs/FORMAT.md, "Vertex ids").
+            vertex_order: job.options.vertex_order.unwrap_or(VertexOrder::Morton),
             ..d
         }
     }

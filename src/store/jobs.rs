@@ -5,6 +5,7 @@
 //! the image repository of a ready model (`store::lumigraph`): it moves that repository's
 //! status instead, and never the model's.
 
+use meshwiki_engine::lod::VertexOrder;
 use meshwiki_engine::lod::segsimplify::Simplifier;
 use serde::{Deserialize, Serialize};
 use sqlx::Row;
@@ -112,6 +113,10 @@ pub struct JobOptions {
     /// `meshwiki-bench normals`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub normal_maps: Option<bool>,
+    /// How the model's vertices are numbered (default `morton`: by the Morton code of their
+    /// positions, smaller files; `source`: ids are the scan file's vertex indices).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertex_order: Option<VertexOrder>,
     /// Triangles of the generated relief (demo jobs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub triangles: Option<u64>,

@@ -25,6 +25,7 @@ use crate::jobs::{JobError, SCAN_EXTENSIONS, scan_extension};
 use crate::store::jobs::{self, CancelOutcome, Job, JobStatus};
 use crate::store::models::Model;
 use crate::store::users::Role;
+use meshwiki_engine::lod::VertexOrder;
 use meshwiki_engine::lod::segsimplify::Simplifier;
 
 /// Mounts the routes (before `models`: `/api/v1/models/upload` must win over `/{id}`).
@@ -114,6 +115,10 @@ struct UploadQuery {
     texture_spread: Option<u8>,
     /// Bake a normal map into every coarse patch (default false).
     normal_maps: Option<bool>,
+    /// How the model's vertices are numbered: `morton` (the default) or `source` (ids are
+    /// the scan file's vertex indices).
+    #[param(value_type = Option<String>)]
+    vertex_order: Option<VertexOrder>,
 }
 
 impl UploadQuery {
@@ -124,6 +129,7 @@ impl UploadQuery {
             texture_quality: self.texture_quality,
             texture_spread: self.texture_spread,
             normal_maps: self.normal_maps,
+            vertex_order: self.vertex_order,
         }
     }
 }

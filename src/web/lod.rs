@@ -14,7 +14,7 @@ use std::sync::Arc;
 use actix_web::body::SizedStream;
 use actix_web::http::{StatusCode, header};
 use actix_web::{HttpRequest, HttpResponse, web};
-use meshwiki_engine::lod::{FormatError, LodFile, NO_GROUP};
+use meshwiki_engine::lod::{FormatError, LodFile, NO_GROUP, VertexOrder};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
@@ -161,6 +161,9 @@ pub struct HierarchyJson {
     pub has_texture: bool,
     /// Every coarse patch carries a normal map (`docs/FORMAT.md`, "Normal maps").
     pub has_normal_maps: bool,
+    /// How the vertex ids number the scan's vertices: `morton` (by the Morton code of their
+    /// positions, `docs/FORMAT.md`, "Vertex ids") or `source` (the scan file's indices).
+    pub vertex_order: VertexOrder,
     /// Size of the whole file in bytes.
     pub file_bytes: u64,
     /// Nodes, by id.
@@ -232,6 +235,7 @@ pub fn hierarchy_json(lod: &LodFile) -> Result<Vec<u8>, serde_json::Error> {
         has_normals: lod.has_normals(),
         has_texture: lod.has_texture(),
         has_normal_maps: lod.has_normal_maps(),
+        vertex_order: lod.vertex_order(),
         file_bytes: lod.bytes().len() as u64,
         nodes,
         groups,

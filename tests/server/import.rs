@@ -6,7 +6,8 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::process::{Command, Output};
 
-use meshwiki_engine::lod::{Culling, LodFile, cut_uniform, cut_view};
+use meshwiki_engine::lod::vertex_order::as_built;
+use meshwiki_engine::lod::{Culling, LodFile, VertexOrder, cut_uniform, cut_view};
 
 use crate::harness::*;
 use crate::lod::{names, relief_ply};
@@ -187,6 +188,9 @@ fn import_then_export_cuts() {
 
     // Uniform cuts: input vertex ids, input positions, the input's boundary, the engine's cut.
     let lod = LodFile::open(&data.join("models/1.mwlod")).unwrap();
+    // Ids number the scan's vertices in the default Morton order on the file's grid.
+    assert_eq!(lod.vertex_order(), VertexOrder::Morton);
+    let input = as_built(&input, lod.vertex_order(), &lod.grid());
     let input_boundary = boundary(input.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
     let step = lod.header().grid_step as f32;
     let max = lod

@@ -189,6 +189,11 @@ fn render_images_buffers_callouts_and_part_views() {
     let file = scan(scans.path());
     let (mesh, _) = meshwiki_engine::mesh::load(&file).expect("load the scan");
     let model_id = import(dir.path(), &file, "Gargoyle");
+    // Ids number the scan's vertices as its LOD file says (by default in Morton order).
+    let lod =
+        meshwiki_engine::lod::LodFile::open(&dir.path().join(format!("models/{model_id}.mwlod")))
+            .expect("the model's LOD file");
+    let mesh = meshwiki_engine::lod::vertex_order::as_built(&mesh, lod.vertex_order(), &lod.grid());
     let server = Server::start(dir.path());
     let admin = server.login("admin", ADMIN_PASSWORD);
     let editor = create_user(&server, &admin, "ed", "editor");

@@ -241,12 +241,19 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
         )
         .assert_error(400);
     assert!(e.contains("patch_triangles"), "{e}");
+    let e = admin
+        .post(
+            &format!("/api/v1/uploads/{id}/finish"),
+            &json!({"title": "Zip session", "build": {"vertex_order": "random"}}),
+        )
+        .assert_error(400);
+    assert!(e.contains("`random`") && e.contains("`morton`"), "{e}");
     let r = admin.post(
         &format!("/api/v1/uploads/{id}/finish"),
-        &json!({"title": "Zip session", "build": {"patch_triangles": 256, "simplifier": "quadric", "normal_maps": true}}),
+        &json!({"title": "Zip session", "build": {"patch_triangles": 256, "simplifier": "quadric", "normal_maps": true, "vertex_order": "source"}}),
     );
     assert_eq!(r.status, 202, "{}", r.text());
-    models.push((r.json(), Some(256), true));
+    models.push((r.json(), Some(256), true, "source"));
 
     // The raw API: options are query parameters, refused before the body is read.
     let e = admin
@@ -267,7 +274,7 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
         true,
     );
     assert_eq!(r.status, 202, "{}", r.text());
-    models.push((r.json(), Some(300), false));
+    models.push((r.json(), Some(300), false, "morton"));
 
     // The page's form.
     let page = admin.get("/admin/jobs").text();
@@ -299,12 +306,13 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
             ("simplifier", "segments"),
             ("patch_triangles", "256"),
             ("normal_maps", "on"),
+            ("vertex_order", "source"),
         ],
         &[("relief.zip", "application/zip", &archive)],
     );
     assert_eq!(r.status, 303, "{}", r.text());
 
-    for (j, patch, normal_maps) in &models {
+    for (j, patch, normal_maps, order) in &models {
         assert_eq!(j["model"]["source_name"], "scan.obj", "{j}");
         let job = wait_finished(&admin, j["job"]["id"].as_i64().unwrap(), 120);
         assert_eq!(job["status"], "done", "{job}");
@@ -317,6 +325,8 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
             .get(&format!("/api/v1/models/{}/lod", j["model"]["id"]))
             .json();
         assert_eq!(lod["has_normal_maps"], json!(normal_maps), "{j}");
+        // Vertex ids in Morton order unless the upload asked for the file's own.
+        assert_eq!(lod["vertex_order"], *order, "{j}");
     }
     let list = admin.get("/api/v1/models").json();
     let titles: Vec<&str> = list
@@ -356,6 +366,8 @@ fn a_zip_of_a_scan_and_its_files_builds_through_every_route() {
         .get(&format!("/api/v1/models/{form_model}/lod"))
         .json();
     assert_eq!(lod["has_normal_maps"], true);
+    assert_eq!(lod["vertex_order"], "source");
+    assert_eq!(job["options"]["vertex_order"], "source", "{job}");
     nothing_left(dir.path());
 }
 

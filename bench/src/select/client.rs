@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
+use meshwiki_engine::lod::Grid;
 use roaring::RoaringBitmap;
 use serde_json::{Value, json};
 
@@ -275,6 +276,21 @@ impl Api {
         }
         RoaringBitmap::deserialize_from(&r.body[..])
             .with_context(|| format!("GET {path}: not a serialised RoaringBitmap"))
+    }
+
+    /// The quantisation grid of the model's LOD file (`GET /api/v1/models/{id}/lod`), which
+    /// its vertex numbering is defined on.
+    pub fn lod_grid(&self, model: i64) -> Result<Grid> {
+        let path = format!("/api/v1/models/{model}/lod");
+        let r = self.send("GET", &path, None, Vec::new())?;
+        if r.status != 200 {
+            bail!("GET {path}: {} {}", r.status, r.text());
+        }
+        let v: Value = serde_json::from_slice(&r.body).context("lod answer")?;
+        let origin: [f64; 3] =
+            serde_json::from_value(v["grid"]["origin"].clone()).context("no grid origin")?;
+        let step = v["grid"]["step"].as_f64().context("no grid step")?;
+        Ok(Grid { origin, step })
     }
 
     /// The model's segment counts per scale, finest first, and the suggested scale

@@ -29,6 +29,8 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use meshwiki_engine::lod::VertexOrder;
+use meshwiki_engine::lod::vertex_order::morton_order;
 use serde_json::json;
 
 use client::Api;
@@ -84,6 +86,10 @@ pub struct Args {
     /// With `--sweep`: only these settings (1-based, comma-separated).
     #[arg(long, value_delimiter = ',', requires = "sweep")]
     pub settings: Vec<usize>,
+    /// How the models number their vertices (`meshwiki import --vertex-order`): `morton`,
+    /// the default, or `source`; the ground truth follows.
+    #[arg(long, default_value_t = VertexOrder::Morton)]
+    pub vertex_order: VertexOrder,
 }
 
 /// One protocol: the view size and the simulated user.
@@ -236,32 +242,22 @@ pub fn run(args: Args) -> Result<()> {
     let password = format!("bench-{:016x}", stamp as u64 ^ 0x5eed_5eed);
     mw.add_admin("bench", &password)?;
 
-    // Ground truth and imports.
+    // Imports, then the ground truth (numbered as the models are, which takes their grids).
     let files = data.files(&ids, &scratch.0.join("psb"))?;
     let imports = bar(ids.len() as u64, "import");
-    let mut models = Vec::new();
+    let mut imported = Vec::new();
     for (&id, (off, seg)) in ids.iter().zip(&files) {
         let category = psb::category(id);
         imports.set_message(format!("{id} ({category})"));
-        let mesh = truth::read_off(off)?;
-        let labels = truth::read_seg(seg, mesh.faces)?;
-        let segmentation = truth::segment(&mesh, &labels, MIN_REGION_SHARE);
         let t = Instant::now();
-        let model_id = mw.import(off, &format!("PSB {id} ({category})"))?;
+        let model_id = mw.import(off, &format!("PSB {id} ({category})"), args.vertex_order)?;
         tracing::info!(
             psb = id,
             model_id,
-            faces = mesh.faces,
-            regions = segmentation.regions.len(),
             seconds = t.elapsed().as_secs_f64(),
             "imported"
         );
-        models.push(Model {
-            psb_id: id,
-            model_id,
-            seg: segmentation,
-            faces: mesh.faces,
-        });
+        imported.push((id, model_id, off, seg));
         imports.inc(1);
     }
     imports.finish_and_clear();
@@ -269,6 +265,36 @@ pub fn run(args: Args) -> Result<()> {
 
     let running = mw.serve()?;
     let api = Api::login(&running.base, "bench", &password)?;
+    let mut models = Vec::new();
+    for (id, model_id, off, seg) in imported {
+        let mesh = truth::read_off(off)?;
+        // The model numbers its vertices in the Morton order of their points on its grid
+        // (docs/FORMAT.md, "Vertex ids"; the engine's reader gives the positions): the ground
+        // truth follows it.
+        let mesh = match args.vertex_order {
+            VertexOrder::Source => mesh,
+            VertexOrder::Morton => {
+                let (scan, _) = meshwiki_engine::mesh::load(off)
+                    .with_context(|| format!("reading {}", off.display()))?;
+                let grid = api.lod_grid(model_id)?;
+                truth::renumbered(&mesh, &morton_order(&scan.positions, &grid))?
+            }
+        };
+        let labels = truth::read_seg(seg, mesh.faces)?;
+        let seg = truth::segment(&mesh, &labels, MIN_REGION_SHARE);
+        tracing::info!(
+            psb = id,
+            faces = mesh.faces,
+            regions = seg.regions.len(),
+            "truth"
+        );
+        models.push(Model {
+            psb_id: id,
+            model_id,
+            seg,
+            faces: mesh.faces,
+        });
+    }
     tracing::info!(base = %running.base, "server started");
     let settings = if args.sweep {
         let all = sweep();

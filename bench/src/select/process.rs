@@ -9,6 +9,7 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
+use meshwiki_engine::lod::VertexOrder;
 
 /// Log filter of the spawned processes (their output goes to a log file).
 fn log_filter() -> String {
@@ -68,11 +69,19 @@ impl Meshwiki {
         Ok(())
     }
 
-    /// `import FILE --title T`: builds the model through the real pipeline; returns its id.
-    pub fn import(&self, file: &Path, title: &str) -> Result<i64> {
+    /// `import FILE --title T --vertex-order O`: builds the model through the real pipeline
+    /// (the order named, so the ground truth's map stays right); returns its id.
+    pub fn import(&self, file: &Path, title: &str, order: VertexOrder) -> Result<i64> {
         let file = file.to_string_lossy();
         let out = self
-            .command(&["import", &*file, "--title", title])?
+            .command(&[
+                "import",
+                &*file,
+                "--title",
+                title,
+                "--vertex-order",
+                order.as_str(),
+            ])?
             .stdin(Stdio::null())
             .output()
             .context("running meshwiki import")?;

@@ -1,8 +1,8 @@
 //! Ground truth from the benchmark's files: an ASCII OFF mesh and a `.seg` segmentation (one
 //! segment per face) become regions — the vertices of one segment's faces, with the centroid,
 //! mean normal and extent that frame them (as `engine::render::best_view` frames a part).
-//! Vertex ids are the OFF file's vertex indices, the original ids the LOD hierarchy keeps
-//! (`engine::mesh::off`).
+//! Vertex ids are the OFF file's vertex indices; [`renumbered`] maps them to the ids of a model
+//! built in the default Morton vertex order (`docs/FORMAT.md`, "Vertex ids").
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -84,6 +84,38 @@ pub fn read_off(path: &Path) -> Result<Mesh> {
         triangles,
         face_of,
         faces: nf,
+    })
+}
+
+/// `mesh` with its vertices in the order `order` (`order[new] = old`, a permutation of its
+/// vertices, as `lod::vertex_order::morton_order` gives it); faces keep their order.
+pub fn renumbered(mesh: &Mesh, order: &[u32]) -> Result<Mesh> {
+    if order.len() != mesh.positions.len() {
+        bail!(
+            "the order has {} vertices, the mesh {}",
+            order.len(),
+            mesh.positions.len()
+        );
+    }
+    let mut new_of = vec![u32::MAX; order.len()];
+    for (new, &old) in order.iter().enumerate() {
+        match new_of.get_mut(old as usize) {
+            Some(slot) if *slot == u32::MAX => *slot = new as u32,
+            _ => bail!("the order is not a permutation (vertex {old})"),
+        }
+    }
+    Ok(Mesh {
+        positions: order
+            .iter()
+            .map(|&old| mesh.positions[old as usize])
+            .collect(),
+        triangles: mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| new_of[i as usize]))
+            .collect(),
+        face_of: mesh.face_of.clone(),
+        faces: mesh.faces,
     })
 }
 

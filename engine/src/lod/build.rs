@@ -18,8 +18,8 @@ use super::bounds::{Sphere, merge_spheres, normal_cone, sphere_of_points};
 use super::buckets::{KdSplit, read_bucket, write_buckets};
 use super::codec::{self, Grid, PatchRef};
 use super::format::{
-    GroupRecord, HAS_COLORS, HAS_NORMAL_MAPS, HAS_NORMALS, HAS_TEXTURE, Header, NO_GROUP,
-    NodeRecord, TableWriter,
+    GroupRecord, HAS_COLORS, HAS_NORMAL_MAPS, HAS_NORMALS, HAS_TEXTURE, Header,
+    MORTON_VERTEX_ORDER, NO_GROUP, NodeRecord, TableWriter,
 };
 use super::fragment_quality::{self, Features};
 use super::grouping::{PatchOutline, group_patches};
@@ -27,6 +27,7 @@ use super::ingest::{Ingest, Ingested};
 use super::patch::{BuildPatch, ScratchFile, edge_ends};
 use super::segsimplify::Simplifier;
 use super::simplify::{merge, simplify_group, split_tracked};
+use super::vertex_order::{self, VertexOrder};
 use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink, SourceTexture, TexturedFace};
 use crate::progress::Progress;
 use crate::segment::{self, Collector};
@@ -83,6 +84,10 @@ pub struct BuildOptions {
     /// How each group step simplifies (quadric collapses by default; see
     /// `meshwiki-bench simplify` for the comparison with the segment-driven method).
     pub simplifier: Simplifier,
+    /// How the model's vertices are numbered (their ids): as the scan lists them (default) or
+    /// by the Morton order of their positions (smaller files, [`super::vertex_order`]; what
+    /// the server and the CLI build).
+    pub vertex_order: VertexOrder,
 }
 
 /// The default triangle budget of a patch (the build's, the server's and the CLI's). Larger
@@ -117,6 +122,7 @@ impl Default for BuildOptions {
             normal_maps: false,
             normal_map_density: 4.0,
             simplifier: Simplifier::default(),
+            vertex_order: VertexOrder::default(),
         }
     }
 }
@@ -311,9 +317,18 @@ pub fn build_from(
     if progress.cancelled() {
         return Err(BuildError::Cancelled);
     }
-    let ingested = ingest.finish()?;
+    let mut ingested = ingest.finish()?;
     if ingested.triangle_count == 0 {
         return Err(BuildError::Empty);
+    }
+    if options.vertex_order == VertexOrder::Morton {
+        let grid = choose_grid(&ingested);
+        vertex_order::renumber(
+            &mut ingested,
+            &grid,
+            &scratch.path,
+            options.memory_budget / 5,
+        )?;
     }
     pool.install(|| {
         Builder::run(
@@ -1201,6 +1216,9 @@ impl<'a> Builder<'a> {
         }
         if self.normal_map_bytes.maps > 0 {
             flags |= HAS_NORMAL_MAPS;
+        }
+        if self.options.vertex_order == VertexOrder::Morton {
+            flags |= MORTON_VERTEX_ORDER;
         }
         let header = Header {
             flags,

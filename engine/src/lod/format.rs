@@ -32,6 +32,9 @@ pub const HAS_NORMALS: u32 = 2;
 pub const HAS_TEXTURE: u32 = 4;
 /// Coarse patches carry normal maps (`docs/FORMAT.md`, patch blob).
 pub const HAS_NORMAL_MAPS: u32 = 8;
+/// Vertex ids number the scan's vertices in the Morton order of their positions
+/// ([`super::vertex_order`]), not in the scan file's order.
+pub const MORTON_VERTEX_ORDER: u32 = 16;
 
 /// Fixed-size file header.
 #[repr(C)]
@@ -330,6 +333,15 @@ impl LodFile {
     /// Whether coarse patches carry normal maps.
     pub fn has_normal_maps(&self) -> bool {
         self.header.flags & HAS_NORMAL_MAPS != 0
+    }
+
+    /// How the vertex ids number the scan's vertices.
+    pub fn vertex_order(&self) -> super::VertexOrder {
+        if self.header.flags & MORTON_VERTEX_ORDER != 0 {
+            super::VertexOrder::Morton
+        } else {
+            super::VertexOrder::Source
+        }
     }
 
     /// The whole file (for serving byte ranges).

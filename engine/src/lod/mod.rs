@@ -27,6 +27,7 @@ pub mod segsimplify;
 pub mod simplify;
 pub mod sparse;
 mod spill;
+pub mod vertex_order;
 
 pub use build::{
     BuildError, BuildOptions, BuildReport, build_file, build_from, build_mesh, peak_rss_bytes,
@@ -37,6 +38,7 @@ pub use cut::{
 };
 pub use export::{CutMesh, export_cut};
 pub use format::{FormatError, GroupRecord, LodFile, NO_GROUP, NodeRecord};
+pub use vertex_order::VertexOrder;
 
 /// A heightfield test patch: `(n+1)²` vertices at `step` spacing from the origin, `z =
 /// height(x, y)`, two triangles a cell (counter-clockwise from +z).

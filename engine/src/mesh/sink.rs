@@ -69,7 +69,8 @@ pub trait MeshSink {
     }
 }
 
-/// An indexed triangle mesh in flat arrays (meshoptimizer style). Vertex `i` has original ID `i`.
+/// An indexed triangle mesh in flat arrays (meshoptimizer style), vertices in the file's order
+/// (a build numbers them by `lod::BuildOptions::vertex_order`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Mesh {
     pub positions: Vec<[f32; 3]>,

@@ -21,6 +21,7 @@ use crate::web::auth::{PageAuth, PageForm};
 use crate::web::jobs::check_title;
 use crate::web::multipart::{TextFields, multipart_error};
 use crate::web::{ApiError, AppState, PageError};
+use meshwiki_engine::lod::VertexOrder;
 use meshwiki_engine::lod::segsimplify::Simplifier;
 
 /// Mounts the routes.
@@ -95,6 +96,7 @@ pub struct BuildFields {
     texture_spread: String,
     /// The normal-maps checkbox: "on" when ticked.
     normal_maps: String,
+    vertex_order: String,
 }
 
 impl BuildFields {
@@ -113,6 +115,7 @@ impl BuildFields {
             } else {
                 String::new()
             },
+            vertex_order: text(options.vertex_order.map(|o| o.as_str())),
         }
     }
 
@@ -124,6 +127,7 @@ impl BuildFields {
             &self.texture_quality,
             &self.texture_spread,
             &self.normal_maps,
+            &self.vertex_order,
         ]
         .iter()
         .any(|v| !v.trim().is_empty())
@@ -144,6 +148,10 @@ impl BuildFields {
             "" => None,
             name => Some(name.parse::<Simplifier>().map_err(ApiError::bad)?),
         };
+        let vertex_order = match self.vertex_order.trim() {
+            "" => None,
+            name => Some(name.parse::<VertexOrder>().map_err(ApiError::bad)?),
+        };
         // Ranges are checked where every route's are (`App::submit_scan`).
         Ok(BuildChoices {
             simplifier,
@@ -159,6 +167,7 @@ impl BuildFields {
                     )));
                 }
             },
+            vertex_order,
         })
     }
 }
@@ -243,6 +252,7 @@ async fn receive_form(
             texture_quality: take("texture_quality"),
             texture_spread: take("texture_spread"),
             normal_maps: take("normal_maps"),
+            vertex_order: take("vertex_order"),
         },
     };
     match read {
