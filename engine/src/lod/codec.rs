@@ -310,6 +310,19 @@ fn split_wedges(
     )
 }
 
+/// Whether a vertex stored more than once (`ids`: one per stored vertex) has a copy off the
+/// border of `indices` (the rule decoders apply, [`border_vertices`]).
+fn copies_off_the_border(ids: &[u32], indices: &[u32]) -> bool {
+    let border = border_vertices(indices, ids.len());
+    let mut copies: HashMap<u32, u32> = HashMap::default();
+    for &id in ids {
+        *copies.entry(id).or_default() += 1;
+    }
+    ids.iter()
+        .zip(&border)
+        .any(|(id, &on_border)| !on_border && copies.get(id).is_some_and(|&n| n > 1))
+}
+
 /// Why a blob does not decode.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CodecError {
@@ -461,6 +474,15 @@ pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (
         return encode_split(patch, None, zstd_level, layout);
     };
     let (grid, colors, normals, ids, indices, uvs) = split_wedges(patch, corner_uvs);
+    // Copies of one vertex must decode to one point. They sit on chart-border edges, which
+    // the border rule keeps at full precision, except where the patch is not manifold at the
+    // vertex (fans that touch at one point): there one copy can be interior, quantised to
+    // `2^shift` while another is exact. Such a patch is stored at full precision.
+    let shift = if patch.shift > 0 && copies_off_the_border(&ids, &indices) {
+        0
+    } else {
+        patch.shift
+    };
     encode_split(
         &PatchRef {
             grid_positions: &grid,
@@ -468,7 +490,7 @@ pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (
             normals: normals.as_deref(),
             original_ids: &ids,
             indices: &indices,
-            shift: patch.shift,
+            shift,
             texture: None,
         },
         Some((&uvs, image)),
@@ -1605,6 +1627,74 @@ mod tests {
             bad[0] ^= 1;
             assert!(matches!(blob_bytes(&bad), Err(CodecError::Magic)));
         }
+    }
+
+    #[test]
+    fn copies_of_a_vertex_off_the_border_decode_to_one_point() {
+        // Vertex 0 closes a fan of chart A (its copy there is interior) and touches one more
+        // triangle of chart B (that copy is on the border): a patch not manifold at vertex 0,
+        // as simplification leaves them. At shift 2 the interior copy would round 5 to 4.
+        let grid = Grid {
+            origin: [0.0; 3],
+            step: 1.0,
+        };
+        let mut gp: Vec<[u32; 3]> = vec![[5, 5, 1]];
+        for k in 0..6 {
+            let a = k as f64 * std::f64::consts::PI / 3.0;
+            gp.push([
+                (9.0 + 4.0 * a.cos()) as u32,
+                (9.0 + 4.0 * a.sin()) as u32,
+                0,
+            ]);
+        }
+        gp.extend([[21, 5, 1], [21, 13, 1]]);
+        let mut indices = Vec::new();
+        for k in 0..6u32 {
+            indices.extend([0, 1 + k, 1 + (k + 1) % 6]);
+        }
+        indices.extend([0, 7, 8]);
+        let corner_uvs: Vec<[f32; 2]> = indices
+            .iter()
+            .enumerate()
+            .map(|(c, &v)| {
+                let chart_b = c >= 18;
+                [v as f32 / 10.0 + if chart_b { 0.5 } else { 0.0 }, 0.25]
+            })
+            .collect();
+        let ids: Vec<u32> = (0..gp.len() as u32).collect();
+        let patch = PatchRef {
+            grid_positions: &gp,
+            colors: None,
+            normals: None,
+            original_ids: &ids,
+            indices: &indices,
+            shift: 2,
+            texture: Some((&corner_uvs, &[])),
+        };
+        let p = decode(&encode(&patch, 3), &grid).expect("decodes");
+        let copies: Vec<[f32; 3]> = p
+            .original_ids
+            .iter()
+            .zip(&p.positions)
+            .filter(|(id, _)| **id == 0)
+            .map(|(_, &q)| q)
+            .collect();
+        assert_eq!(copies.len(), 2, "one copy a chart");
+        assert_eq!(copies[0], copies[1]);
+        assert_eq!(copies[0], [5.0, 5.0, 1.0]);
+        // Without the second chart nothing is copied, and the interior stays coarser.
+        let p = decode(
+            &encode(
+                &PatchRef {
+                    texture: None,
+                    ..patch
+                },
+                3,
+            ),
+            &grid,
+        )
+        .expect("decodes");
+        assert_eq!(p.shift, 2);
     }
 
     #[test]
