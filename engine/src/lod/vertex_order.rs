@@ -25,7 +25,7 @@
 //! (z before y before x at equal bits: x holds the lowest bit of each triple), the smaller
 //! coordinate comes first (Chan's most-significant-bit comparison).
 //!
-//! Out of core: the vertices are binned by the top [`BIN_BITS`] bits of their codes (a
+//! Out of core: the vertices are binned by the top `BIN_BITS` (15) bits of their codes (a
 //! counting pass and a stable scatter into a spilled index array), and each bin is sorted
 //! alone, so memory holds one bin's keys, not the scan's. A bin is one cell of a 2⁵-per-axis
 //! split of the grid's power-of-two cube; a surface fills a few hundred to a few thousand.
