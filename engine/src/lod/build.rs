@@ -321,8 +321,10 @@ pub fn build_from(
     if ingested.triangle_count == 0 {
         return Err(BuildError::Empty);
     }
+    // The file's grid, which the Morton numbering is defined on (renumbering leaves the
+    // bounds and mean edge it is chosen from as they are).
+    let grid = choose_grid(&ingested);
     if options.vertex_order == VertexOrder::Morton {
-        let grid = choose_grid(&ingested);
         vertex_order::renumber(
             &mut ingested,
             &grid,
@@ -333,6 +335,7 @@ pub fn build_from(
     pool.install(|| {
         Builder::run(
             ingested,
+            grid,
             import,
             started,
             output,
@@ -473,6 +476,7 @@ impl<'a> Builder<'a> {
     #[allow(clippy::too_many_arguments)]
     fn run(
         mut ingested: Ingested,
+        grid: Grid,
         import: ImportStats,
         started: Instant,
         output: &Path,
@@ -482,7 +486,6 @@ impl<'a> Builder<'a> {
         threads: usize,
     ) -> Result<BuildReport, BuildError> {
         let stages = vec![("import".to_string(), started.elapsed().as_secs_f64())];
-        let grid = choose_grid(&ingested);
 
         let mut builder = Builder {
             options,

@@ -311,15 +311,14 @@ fn split_wedges(
 }
 
 /// Whether a vertex stored more than once (`ids`: one per stored vertex) has a copy off the
-/// border of `indices` (the rule decoders apply, [`border_vertices`]).
-fn copies_off_the_border(ids: &[u32], indices: &[u32]) -> bool {
-    let border = border_vertices(indices, ids.len());
+/// `border` (the rule decoders apply, [`border_vertices`]).
+fn copies_off_the_border(ids: &[u32], border: &[bool]) -> bool {
     let mut copies: HashMap<u32, u32> = HashMap::default();
     for &id in ids {
         *copies.entry(id).or_default() += 1;
     }
     ids.iter()
-        .zip(&border)
+        .zip(border)
         .any(|(id, &on_border)| !on_border && copies.get(id).is_some_and(|&n| n > 1))
 }
 
@@ -474,15 +473,6 @@ pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (
         return encode_split(patch, None, zstd_level, layout);
     };
     let (grid, colors, normals, ids, indices, uvs) = split_wedges(patch, corner_uvs);
-    // Copies of one vertex must decode to one point. They sit on chart-border edges, which
-    // the border rule keeps at full precision, except where the patch is not manifold at the
-    // vertex (fans that touch at one point): there one copy can be interior, quantised to
-    // `2^shift` while another is exact. Such a patch is stored at full precision.
-    let shift = if patch.shift > 0 && copies_off_the_border(&ids, &indices) {
-        0
-    } else {
-        patch.shift
-    };
     encode_split(
         &PatchRef {
             grid_positions: &grid,
@@ -490,7 +480,7 @@ pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (
             normals: normals.as_deref(),
             original_ids: &ids,
             indices: &indices,
-            shift,
+            shift: patch.shift,
             texture: None,
         },
         Some((&uvs, image)),
@@ -739,6 +729,16 @@ fn encode_split(
             walked_border = border_vertices(&indices, used);
             &walked_border
         }
+    };
+    // Copies of one vertex (a textured patch stores one per chart) must decode to one point.
+    // They sit on chart-border edges, which the border keeps at full precision, except where
+    // the patch is not manifold at the vertex (fans that touch at one point): there one copy
+    // can be interior, quantised to `2^shift`, while another is exact. Such a patch is stored
+    // at full precision. (Untextured patches store every vertex once.)
+    let shift = if shift > 0 && texture.is_some() && copies_off_the_border(&ids, border) {
+        0
+    } else {
+        shift
     };
 
     // Positions (relative to the patch minimum) and ids, each from its prediction.

@@ -32,8 +32,8 @@ pub const HAS_NORMALS: u32 = 2;
 pub const HAS_TEXTURE: u32 = 4;
 /// Coarse patches carry normal maps (`docs/FORMAT.md`, patch blob).
 pub const HAS_NORMAL_MAPS: u32 = 8;
-/// Vertex ids number the scan's vertices in the Morton order of their positions
-/// ([`super::vertex_order`]), not in the scan file's order.
+/// Vertex ids number the scan's vertices in the Morton order of their points on the file's
+/// grid ([`super::vertex_order`]), not in the scan file's order.
 pub const MORTON_VERTEX_ORDER: u32 = 16;
 
 /// Fixed-size file header.

@@ -166,9 +166,7 @@ pub fn as_built(mesh: &Mesh, order: VertexOrder, grid: &Grid) -> Mesh {
     }
     let order = morton_order(&mesh.positions, grid);
     let mut new_of = vec![0u32; order.len()];
-    for (new, &old) in order.iter().enumerate() {
-        new_of[old as usize] = new as u32;
-    }
+    invert_into(&order, &mut new_of);
     // Colours and normals are empty when the scan has none.
     fn permuted<T: Copy>(values: &[T], order: &[u32]) -> Vec<T> {
         if values.is_empty() {
@@ -249,12 +247,7 @@ pub(crate) fn renumber(
     let order = order.as_slice();
     let mut new_of = SpillVec::new(dir.join("vertex-rank.bin"), memory_limit);
     new_of.resize(n, 0u32)?;
-    {
-        let ranks = new_of.as_mut_slice();
-        for (new, &old) in order.iter().enumerate() {
-            ranks[old as usize] = new as u32;
-        }
-    }
+    invert_into(order, new_of.as_mut_slice());
     ingested.positions = permuted(&ingested.positions, order, dir, "positions", memory_limit)?;
     ingested.normals = permuted(&ingested.normals, order, dir, "normals", memory_limit)?;
     if let Some(colors) = &ingested.colors {
@@ -264,6 +257,14 @@ pub(crate) fn renumber(
     remap_faces(&ingested.faces_path, &renumbered, new_of.as_slice())?;
     std::fs::rename(&renumbered, &ingested.faces_path)?;
     Ok(())
+}
+
+/// The inverse of the permutation `order` (`order[new] = old`) into `new_of` (`new_of[old] =
+/// new`, as long as `order`).
+fn invert_into(order: &[u32], new_of: &mut [u32]) {
+    for (new, &old) in order.iter().enumerate() {
+        new_of[old as usize] = new as u32;
+    }
 }
 
 /// `values` in the new order, in a fresh spilled array.
