@@ -54,6 +54,10 @@ const COMPRESSION_ZSTD: u8 = 1;
 const FLAG_COLORS: u32 = 1;
 const FLAG_NORMALS: u32 = 2;
 const FLAG_UVS: u32 = 4;
+/// `MWP3` payload flag: the ids stream lists the ids in the Morton order of the vertices'
+/// decoded grid points ([`sorted_ids`]) instead of predicting them along the traversal.
+const FLAG_SORTED_IDS: u32 = 8;
+const KNOWN_FLAGS: u32 = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS;
 /// Blob header flag (byte 5): an image section (the colour atlas) follows the 12-byte header.
 const BLOB_IMAGE: u8 = 1;
 /// Blob header flag (byte 5): a normal-map section follows (after the image section, if any).
@@ -337,6 +341,8 @@ pub enum CodecError {
     Stream(&'static str),
     #[error("patch declares implausible sizes")]
     Sizes,
+    #[error("patch declares unknown flags {0:#x}")]
+    Flags(u32),
 }
 
 /// Vertices on an edge used by exactly one triangle (the patch border).
@@ -655,6 +661,20 @@ impl<'a> Source<'a> {
     }
 }
 
+/// A patch's vertices in the Morton order of their grid points, ties by vertex
+/// (`vertex_order::morton_cmp`). With the scan's ids in Morton order of the same grid (header
+/// flag bit 4) a full-precision patch lists its ids ascending this way, so `sorted_ids` codes
+/// only the gaps between them: on the scans about 1 bit a vertex against 6-7 predicted along
+/// the traversal. Quantised interiors of coarse patches break the order here and there, which
+/// costs a larger gap; the encoder keeps whichever stream is shorter.
+fn morton_sequence(points: &[[u32; 3]]) -> Vec<u32> {
+    let mut sequence: Vec<u32> = (0..points.len() as u32).collect();
+    sequence.sort_unstable_by(|&a, &b| {
+        super::vertex_order::morton_cmp((points[a as usize], a), (points[b as usize], b))
+    });
+    sequence
+}
+
 /// [`encode`] of a patch whose vertices are already one per texture coordinate (`uvs[v]`).
 fn encode_split(
     patch: &PatchRef<'_>,
@@ -775,7 +795,26 @@ fn encode_split(
         id_values[v] = [ids[v] as i64];
     }
     let pos_stream = pos_sink.finish();
-    let id_stream = id_sink.finish();
+    let mut id_stream = id_sink.finish();
+    let mut sorted = false;
+    if v3 {
+        let points: Vec<[u32; 3]> = decoded_pos
+            .iter()
+            .map(|p| std::array::from_fn(|k| (p[k] + min[k] as i64) as u32))
+            .collect();
+        let mut sink = Sink::new(true, 1);
+        let mut previous = -1i64;
+        for v in morton_sequence(&points) {
+            let id = ids[v as usize] as i64;
+            sink.put(0, id - previous - 1);
+            previous = id;
+        }
+        let stream = sink.finish();
+        if stream.len() < id_stream.len() {
+            id_stream = stream;
+            sorted = true;
+        }
+    }
 
     let color_stream = colors
         .as_ref()
@@ -826,6 +865,9 @@ fn encode_split(
 
     if normals.is_some() {
         flags |= FLAG_NORMALS;
+    }
+    if sorted {
+        flags |= FLAG_SORTED_IDS;
     }
     let streams = [
         &index_stream,
@@ -1141,6 +1183,10 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     let triangle_count = u32_at(&payload, 4)?;
     let flags = u32_at(&payload, 8)?;
     let shift = u32_at(&payload, 12)?;
+    let sorted = flags & FLAG_SORTED_IDS != 0;
+    if flags & !KNOWN_FLAGS != 0 || (sorted && !v3) {
+        return Err(CodecError::Flags(flags));
+    }
     if vertex_count > MAX_ELEMENTS
         || triangle_count > max_triangles
         || vertex_count > triangle_count.saturating_mul(3)
@@ -1238,9 +1284,11 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
                 pos[v][k] = (guess[k] >> shift).wrapping_add(r).wrapping_shl(shift);
             }
         }
-        let id_guess = id_guess(multi.as_ref(), &ids, v, &prediction);
-        let r = ids_src.get(id_channel(&prediction), "original ids")?;
-        ids[v] = [id_guess.wrapping_add(r)];
+        if !sorted {
+            let id_guess = id_guess(multi.as_ref(), &ids, v, &prediction);
+            let r = ids_src.get(id_channel(&prediction), "original ids")?;
+            ids[v] = [id_guess.wrapping_add(r)];
+        }
     }
     let mut grid_positions = Vec::with_capacity(n);
     for p in &pos {
@@ -1249,6 +1297,15 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
             return Err(CodecError::Stream("positions"));
         }
         grid_positions.push(g.map(|c| c as u32));
+    }
+    if sorted {
+        let mut src = Source::new(true, ids_s, 1);
+        let mut previous = -1i64;
+        for v in morton_sequence(&grid_positions) {
+            let r = src.get(0, "original ids")?;
+            previous = previous.wrapping_add(1).wrapping_add(r);
+            ids[v as usize] = [previous];
+        }
     }
     let original_ids = ids
         .iter()
@@ -1794,6 +1851,90 @@ mod tests {
                 dot > 0.9995f64.min(1.0f64.to_radians().cos()),
                 "{v:?} -> {d:?}"
             );
+        }
+    }
+
+    /// The payload flags of an `MWP3` blob.
+    fn payload_flags(blob: &[u8]) -> u32 {
+        let framed = unframe(blob, 1 << 26).expect("frames");
+        assert!(framed.v3);
+        u32_at(&framed.payload, 8).expect("flags")
+    }
+
+    #[test]
+    fn ids_in_morton_order_are_listed_sorted_and_exact() {
+        let (grid, gp, raster_ids, _, _, indices) = sheet();
+        // Ids numbering the sheet's points in Morton order, with gaps of 1 to 3 (a coarse
+        // patch keeps a subset of the scan's vertices).
+        let mut morton_ids = vec![0u32; gp.len()];
+        let mut next = 40;
+        for (rank, v) in morton_sequence(&gp).into_iter().enumerate() {
+            morton_ids[v as usize] = next;
+            next += 1 + (rank as u32 * 7) % 3;
+        }
+        for (ids, name) in [(&morton_ids, "Morton"), (&raster_ids, "raster")] {
+            for shift in [0, 3] {
+                let patch = PatchRef {
+                    grid_positions: &gp,
+                    colors: None,
+                    normals: None,
+                    original_ids: ids,
+                    indices: &indices,
+                    shift,
+                    texture: None,
+                };
+                let blob = encode(&patch, 0);
+                let sorted = payload_flags(&blob) & FLAG_SORTED_IDS != 0;
+                // At full precision the Morton ids list sorted; raster ids are what the
+                // parallelograms predict exactly (a + b - c on a regular grid), so they stay
+                // predicted. With quantised interiors the encoder picks either.
+                if shift == 0 {
+                    assert_eq!(sorted, name == "Morton", "{name} ids at shift 0");
+                }
+                let p = decode(&blob, &grid).expect("decodes");
+                let before = canon(
+                    indices
+                        .chunks(3)
+                        .map(|t| [ids[t[0] as usize], ids[t[1] as usize], ids[t[2] as usize]]),
+                );
+                let after = canon(p.indices.chunks(3).map(|t| {
+                    [
+                        p.original_ids[t[0] as usize],
+                        p.original_ids[t[1] as usize],
+                        p.original_ids[t[2] as usize],
+                    ]
+                }));
+                assert_eq!(
+                    before, after,
+                    "{name} ids at shift {shift}, sorted {sorted}"
+                );
+                if shift == 0 {
+                    for (i, id) in p.original_ids.iter().enumerate() {
+                        let old = ids.iter().position(|x| x == id).expect("id kept");
+                        assert_eq!(p.grid_positions[i], gp[old]);
+                    }
+                }
+            }
+        }
+        // The flag is only for `MWP3`, and unknown flags are errors.
+        let patch = PatchRef {
+            grid_positions: &gp,
+            colors: None,
+            normals: None,
+            original_ids: &morton_ids,
+            indices: &indices,
+            shift: 0,
+            texture: None,
+        };
+        let blob = encode(&patch, 0);
+        let flags_at = blob.len() - unframe(&blob, 1 << 26).expect("frames").payload.len() + 8;
+        for bad in [FLAG_SORTED_IDS | 16, 1 << 31] {
+            let mut corrupt = blob.clone();
+            corrupt[flags_at..flags_at + 4].copy_from_slice(&bad.to_le_bytes());
+            assert!(matches!(
+                decode(&corrupt, &grid),
+                Err(CodecError::Flags(f)) if f == bad
+            ));
         }
     }
 

@@ -105,8 +105,9 @@ fn morton_less(a: [u32; 3], b: [u32; 3]) -> bool {
     a[axis] < b[axis]
 }
 
-/// The Morton order of grid points, ties by index.
-fn morton_cmp(a: ([u32; 3], u32), b: ([u32; 3], u32)) -> std::cmp::Ordering {
+/// The Morton order of grid points, ties by index (also the order in which a patch blob with
+/// [`super::codec`]'s sorted ids lists them).
+pub(crate) fn morton_cmp(a: ([u32; 3], u32), b: ([u32; 3], u32)) -> std::cmp::Ordering {
     if a.0 == b.0 {
         a.1.cmp(&b.1)
     } else if morton_less(a.0, b.0) {

@@ -27,6 +27,9 @@ const COMPRESSION_ZSTD = 1;
 const FLAG_COLORS = 1;
 const FLAG_NORMALS = 2;
 const FLAG_UVS = 4;
+/** `MWP3` payload flag: ids listed in the Morton order of the decoded grid points. */
+const FLAG_SORTED_IDS = 8;
+const KNOWN_FLAGS = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS;
 /** Blob header flag (byte 5): an image section (u32 length, then the JPEG) follows byte 12. */
 const BLOB_IMAGE = 1;
 /** Blob header flag (byte 5): a normal-map section (u32 length, then the JPEG) follows. */
@@ -391,7 +394,7 @@ function residualSource(bytes, channels, name) {
  * parallelograms (ids: the median of the clamped ones), or by its traversal prediction when
  * it has none; position residuals by channel of the axis' role.
  */
-function decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids) {
+function decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids, sortedIds) {
   const { kind, pa, pb, pc } = conn;
   const posSource = residualSource(posS, POSITION_CHANNELS, 'positions');
   const idSource = residualSource(idsS, ID_CHANNELS, 'original ids');
@@ -428,6 +431,7 @@ function decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids) {
       const r = posSource(channel);
       pos[v * 3 + k] = interior ? (floorShift(guess[k], shift) + r) * 2 ** shift : guess[k] + r;
     }
+    if (sortedIds) continue;
     let id;
     if (to > from) {
       values.length = 0;
@@ -443,6 +447,43 @@ function decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids) {
       id = predict(ids, 1, 0, kind[v], pa[v], pb[v], pc[v]);
     }
     ids[v] = id + idSource(isPara ? 1 : 0);
+  }
+}
+
+/**
+ * Whether grid point `a` (index `i` of `g`, three u32 per point) comes before `b` in Morton
+ * order, ties by index (engine: vertex_order::morton_cmp): of the axis whose coordinates
+ * differ in the highest bit (at an equal bit z, then y), the smaller first. Grid coordinates
+ * are below 2^32, so `(x ^ y) >>> 0` is their exact xor.
+ */
+function mortonBefore(g, i, j) {
+  const msbBelow = (x, y) => x < y && x < (x ^ y) >>> 0;
+  let axis = 2;
+  let top = (g[3 * i + 2] ^ g[3 * j + 2]) >>> 0;
+  for (const k of [1, 0]) {
+    const d = (g[3 * i + k] ^ g[3 * j + k]) >>> 0;
+    if (msbBelow(top, d)) {
+      axis = k;
+      top = d;
+    }
+  }
+  if (top === 0) return i < j;
+  return g[3 * i + axis] < g[3 * j + axis];
+}
+
+/**
+ * `MWP3` ids with payload flag 3 (engine: codec's `morton_sequence`): the vertices sorted by
+ * the Morton order of their decoded grid points (ties by vertex), each id the previous one
+ * (−1 before the first) plus 1 plus a residual of the stream's one channel.
+ */
+function decodeSortedIds(gridPositions, n, idsS, ids) {
+  const source = residualSource(idsS, 1, 'original ids');
+  const sequence = Array.from({ length: n }, (_, v) => v);
+  sequence.sort((i, j) => (i === j ? 0 : mortonBefore(gridPositions, i, j) ? -1 : 1));
+  let previous = -1;
+  for (const v of sequence) {
+    previous = previous + 1 + source(0);
+    ids[v] = previous;
   }
 }
 
@@ -516,10 +557,11 @@ function normalAxis(pos, a, b, c) {
  *   gridPositions: Uint32Array, positions: Float32Array, ids: Uint32Array,
  *   indices: Uint32Array, colors: Uint8Array|null, normals: Float32Array|null,
  *   uvs: Float32Array|null, image: Uint8Array|null, normalMap: Uint8Array|null,
- *   border: Uint8Array}}
+ *   border: Uint8Array, sortedIds: boolean}}
  *   `uvs`: texture coordinates (u, v per vertex, v = 0 the image's top row) when the payload
  *   has them; `image`: the atlas (JPEG bytes, a copy owning its buffer) when the blob has an
- *   image section; `normalMap`: the normal map (JPEG bytes, a copy) when it has one.
+ *   image section; `normalMap`: the normal map (JPEG bytes, a copy) when it has one;
+ *   `sortedIds`: whether the blob lists its ids in Morton order (payload flag bit 3).
  */
 export function decodePatch(blob, grid, deps) {
   if (!(blob instanceof Uint8Array)) throw new DecodeError('blob must be a Uint8Array');
@@ -567,6 +609,10 @@ export function decodePatch(blob, grid, deps) {
   if (n > MAX_ELEMENTS || t > MAX_ELEMENTS || shift > MAX_SHIFT) {
     throw new DecodeError('patch declares implausible sizes');
   }
+  const sortedIds = (flags & FLAG_SORTED_IDS) !== 0;
+  if ((flags & ~KNOWN_FLAGS) !== 0 || (sortedIds && !v3)) {
+    throw new DecodeError(`patch declares unknown flags 0x${flags.toString(16)}`);
+  }
   const min = [u32(payload, 16), u32(payload, 20), u32(payload, 24)];
   const streams = [];
   let at = PAYLOAD_HEADER;
@@ -595,7 +641,7 @@ export function decodePatch(blob, grid, deps) {
     indices = conn.indices;
     multi = parallelograms(indices, n);
     border = multi.border;
-    decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids);
+    decodeResiduals(conn, multi, n, shift, border, posS, idsS, pos, ids, sortedIds);
   } else {
     const indexBytes = new Uint8Array(t * 3 * 4);
     if (t > 0) {
@@ -639,6 +685,7 @@ export function decodePatch(blob, grid, deps) {
       positions[v * 3 + k] = grid.origin[k] + grid.step * g;
     }
   }
+  if (sortedIds) decodeSortedIds(gridPositions, n, idsS, ids);
   const originalIds = new Uint32Array(n);
   for (let v = 0; v < n; v++) {
     if (!(ids[v] >= 0 && ids[v] <= U32_MAX)) throw new DecodeError('stream original ids does not decode');
@@ -704,5 +751,6 @@ export function decodePatch(blob, grid, deps) {
     image,
     normalMap,
     border,
+    sortedIds,
   };
 }
