@@ -7,11 +7,13 @@
 //!   parallelograms (Touma–Gotsman): `MWP3` by the multi-way prediction of
 //!   [`super::parallelogram`] (ids by a median-edge rule), residuals range-coded in channels
 //!   ([`super::rangecoder`]); `MWP2` by the one parallelogram along the triangle order,
-//!   zigzag LEB128 residuals. Vertices on the patch border keep full grid precision, so a
-//!   vertex shared by two patches (possibly at different levels) decodes to identical
-//!   coordinates and cuts stay watertight; interior vertices of coarse patches are stored at a
-//!   coarser step (`2^shift` grid units) chosen from the node's error, as Nexus quantises by a
-//!   fraction of the node error.
+//!   zigzag LEB128 residuals. `MWP3` ids may instead be listed in the Morton order of the
+//!   decoded grid points, as gaps ([`morton_sequence`]; shorter wherever the scan's ids are
+//!   in Morton order, as builds number them). Vertices on the patch border keep full grid
+//!   precision, so a vertex shared by two patches (possibly at different levels) decodes to
+//!   identical coordinates and cuts stay watertight; interior vertices of coarse patches are
+//!   stored at a coarser step (`2^shift` grid units) chosen from the node's error, as Nexus
+//!   quantises by a fraction of the node error.
 //! - Colours: YCoCg with 6 bits (meshoptimizer's colour filter); `MWP3` predicts its bytes
 //!   from the vertex's earlier neighbours and range-codes them, `MWP2` uses meshoptimizer's
 //!   vertex codec. Decoded by [`decode_ycocg`] in exact integer arithmetic: meshoptimizer's own
@@ -55,7 +57,7 @@ const FLAG_COLORS: u32 = 1;
 const FLAG_NORMALS: u32 = 2;
 const FLAG_UVS: u32 = 4;
 /// `MWP3` payload flag: the ids stream lists the ids in the Morton order of the vertices'
-/// decoded grid points ([`sorted_ids`]) instead of predicting them along the traversal.
+/// decoded grid points ([`morton_sequence`]) instead of predicting them along the traversal.
 const FLAG_SORTED_IDS: u32 = 8;
 const KNOWN_FLAGS: u32 = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS;
 /// Blob header flag (byte 5): an image section (the colour atlas) follows the 12-byte header.
@@ -663,7 +665,7 @@ impl<'a> Source<'a> {
 
 /// A patch's vertices in the Morton order of their grid points, ties by vertex
 /// (`vertex_order::morton_cmp`). With the scan's ids in Morton order of the same grid (header
-/// flag bit 4) a full-precision patch lists its ids ascending this way, so `sorted_ids` codes
+/// flag bit 4) a full-precision patch lists its ids ascending this way, so the sorted ids code
 /// only the gaps between them: on the scans about 1 bit a vertex against 6-7 predicted along
 /// the traversal. Quantised interiors of coarse patches break the order here and there, which
 /// costs a larger gap; the encoder keeps whichever stream is shorter.
