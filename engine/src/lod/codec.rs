@@ -8,7 +8,7 @@
 //!   [`super::parallelogram`] (ids by a median-edge rule), residuals range-coded in channels
 //!   ([`super::rangecoder`]); `MWP2` by the one parallelogram along the triangle order,
 //!   zigzag LEB128 residuals. `MWP3` ids may instead be listed in the Morton order of the
-//!   decoded grid points, as gaps ([`morton_sequence`]; shorter wherever the scan's ids are
+//!   decoded grid points, as gaps (`morton_sequence`; shorter wherever the scan's ids are
 //!   in Morton order, as builds number them). Vertices on the patch border keep full grid
 //!   precision, so a vertex shared by two patches (possibly at different levels) decodes to
 //!   identical coordinates and cuts stay watertight; interior vertices of coarse patches are
