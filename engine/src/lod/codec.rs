@@ -1456,9 +1456,13 @@ mod tests {
         (grid, gp, ids, colors, normals, indices)
     }
 
-    fn canon(tris: impl Iterator<Item = [u32; 3]>) -> Vec<[u32; 3]> {
-        let mut t: Vec<[u32; 3]> = tris
+    /// A patch's triangles as triples of original ids, in a canonical order: what a roundtrip
+    /// must keep whatever order the encoder puts vertices and triangles in.
+    fn triangles_by_id(indices: &[u32], ids: &[u32]) -> Vec<[u32; 3]> {
+        let mut t: Vec<[u32; 3]> = indices
+            .chunks(3)
             .map(|t| {
+                let t = [ids[t[0] as usize], ids[t[1] as usize], ids[t[2] as usize]];
                 let r = (0..3).min_by_key(|&k| t[k]).unwrap_or(0);
                 [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
             })
@@ -1770,19 +1774,10 @@ mod tests {
         };
         for blob in in_both_layouts(&patch, 3) {
             let p = decode(&blob, &grid).expect("decodes");
-            let before = canon(
-                indices
-                    .chunks(3)
-                    .map(|t| [ids[t[0] as usize], ids[t[1] as usize], ids[t[2] as usize]]),
+            assert_eq!(
+                triangles_by_id(&indices, &ids),
+                triangles_by_id(&p.indices, &p.original_ids)
             );
-            let after = canon(p.indices.chunks(3).map(|t| {
-                [
-                    p.original_ids[t[0] as usize],
-                    p.original_ids[t[1] as usize],
-                    p.original_ids[t[2] as usize],
-                ]
-            }));
-            assert_eq!(before, after);
             for (i, id) in p.original_ids.iter().enumerate() {
                 let old = ids.iter().position(|x| x == id).expect("id kept");
                 assert_eq!(p.grid_positions[i], gp[old]);
@@ -1894,20 +1889,9 @@ mod tests {
                     assert_eq!(sorted, name == "Morton", "{name} ids at shift 0");
                 }
                 let p = decode(&blob, &grid).expect("decodes");
-                let before = canon(
-                    indices
-                        .chunks(3)
-                        .map(|t| [ids[t[0] as usize], ids[t[1] as usize], ids[t[2] as usize]]),
-                );
-                let after = canon(p.indices.chunks(3).map(|t| {
-                    [
-                        p.original_ids[t[0] as usize],
-                        p.original_ids[t[1] as usize],
-                        p.original_ids[t[2] as usize],
-                    ]
-                }));
                 assert_eq!(
-                    before, after,
+                    triangles_by_id(&indices, ids),
+                    triangles_by_id(&p.indices, &p.original_ids),
                     "{name} ids at shift {shift}, sorted {sorted}"
                 );
                 if shift == 0 {
