@@ -32,9 +32,14 @@
 //! | 32 + a + n | z | depth: PNG, RGB8; `q = 256·r + g`, 65535 = no surface, else depth `d0 + q / 65534 · (d1 − d0)` |
 //!
 //! The depth image is a quarter of the colour side ([`depth_side`]); each of its pixels holds
-//! the nearest depth of the 4×4 colour pixels it covers (a conservative visibility test: a
-//! client's tolerance covers the footprint). At a quarter, depth is about a fifth of an image's
-//! bytes; at half the side it was two fifths.
+//! the mean depth of the covered colour pixels of the 4×4 block it covers. A client
+//! interpolates it bilinearly where four neighbours lie on one surface and takes the block's
+//! own value across a depth jump (its tolerance covers the block's footprint). The mean, not
+//! the nearest, is what lets the client find the very point an image saw: the nearest of a
+//! block lies in front of the rest of a rough surface, which moved each image's texels by that
+//! roughness times the angle between the image's ray and the view's (on the 5M relief the
+//! image-based views gained 1.7 dB on average, at the same bytes). At a quarter, depth is
+//! about a tenth of an image's bytes; at the full side it was more than half.
 
 use image::ImageEncoder;
 use image::codecs::png::PngEncoder;
@@ -328,20 +333,33 @@ pub fn depth_side(side: u32) -> u32 {
     side.div_ceil(DEPTH_BLOCK)
 }
 
-/// Depth codes at [`depth_side`] (each the nearest of its block's pixels) and their range.
+/// Depth codes at [`depth_side`] (each the mean of its block's covered pixels) and their range.
 fn quantise_depth(depth: &[f32], side: usize) -> (usize, Vec<u16>, [f32; 2]) {
     let block = DEPTH_BLOCK as usize;
     let half = depth_side(side as u32) as usize;
-    let mut near = vec![f32::INFINITY; half * half];
+    let mut sum = vec![0f64; half * half];
+    let mut cnt = vec![0u32; half * half];
     for y in 0..side {
         for x in 0..side {
             let d = depth[y * side + x];
-            let h = &mut near[(y / block) * half + x / block];
-            if d < *h {
-                *h = d;
+            if d.is_finite() {
+                let i = (y / block) * half + x / block;
+                sum[i] += d as f64;
+                cnt[i] += 1;
             }
         }
     }
+    let near: Vec<f32> = sum
+        .iter()
+        .zip(&cnt)
+        .map(|(&s, &c)| {
+            if c > 0 {
+                (s / c as f64) as f32
+            } else {
+                f32::INFINITY
+            }
+        })
+        .collect();
     let finite = near.iter().filter(|d| d.is_finite());
     let d0 = finite.clone().fold(f32::INFINITY, |a, &b| a.min(b));
     let d1 = finite.fold(f32::NEG_INFINITY, |a, &b| a.max(b));
@@ -415,13 +433,39 @@ mod tests {
         assert!(albedo[centre_left][0] > 150 && albedo[centre_left][2] < 90);
         let nz = img.normal[32 * 64 + 32][2] as f32 / 127.5 - 1.0;
         assert!(nz > 0.95, "{nz}");
-        // Depth: within a quantisation step, and nearest of each 4x4 block.
+        // Depth: within a quantisation step, the mean of each 4x4 block (here between its
+        // nearest and farthest pixel, the sphere's depth varying within it).
         let got = img.depth_at(8 * 16 + 8).unwrap();
-        let want = (32..36)
+        let block: Vec<f32> = (32..36)
             .flat_map(|y| (32..36).map(move |x| y * 64 + x))
             .map(|i| d[i])
-            .fold(f32::INFINITY, f32::min);
+            .collect();
+        let want = block.iter().sum::<f32>() / block.len() as f32;
         assert!((got - want).abs() < 1e-4, "{got} vs {want}");
+        let (near, far) = block
+            .iter()
+            .fold((f32::INFINITY, 0f32), |(n, f), &x| (n.min(x), f.max(x)));
+        assert!(
+            near < got - 1e-4 && got + 1e-4 < far,
+            "{near} < {got} < {far}"
+        );
+        // On the rim only the covered pixels count.
+        let rim = (0..16 * 16)
+            .find(|&i| {
+                let (bx, by) = (i % 16, i / 16);
+                let pixels = (0..16).map(|k| d[(4 * by + k / 4) * 64 + 4 * bx + k % 4]);
+                let covered: Vec<f32> = pixels.filter(|x| x.is_finite()).collect();
+                !covered.is_empty() && covered.len() < 16
+            })
+            .expect("a block on the sphere's rim");
+        let (bx, by) = (rim % 16, rim / 16);
+        let covered: Vec<f32> = (0..16)
+            .map(|k| d[(4 * by + k / 4) * 64 + 4 * bx + k % 4])
+            .filter(|x| x.is_finite())
+            .collect();
+        let mean = covered.iter().sum::<f32>() / covered.len() as f32;
+        let stored = img.depth_at(rim).unwrap();
+        assert!((stored - mean).abs() < 1e-4, "rim {stored} vs {mean}");
         assert_eq!(img.depth_at(0), None);
         // Without albedo the section is absent and smaller.
         let plain = encode(side, None, &n, &d, 90).unwrap().unwrap();
