@@ -75,7 +75,7 @@ uniform float uLgPixel;
 // Samples along the view ray when searching an image's depth for the surface, then bisections
 // of the stretch where the ray passes behind it.
 const int LG_STEPS = 8;
-const int LG_BISECT = 4;
+const int LG_BISECT = 2;
 // Four neighbouring depth pixels lie on one surface (and are interpolated) where their depths
 // differ by at most this many image pixels' footprint at their depth.
 const float LG_JUMP = 24.0;
