@@ -77,7 +77,8 @@ uniform float uLgPixel;
 const int LG_STEPS = 8;
 const int LG_BISECT = 2;
 // Four neighbouring depth pixels lie on one surface (and are interpolated) where their depths
-// differ by at most this many image pixels' footprint at their depth.
+// differ by at most LG_JUMP · depth / side: 12 image pixels' footprint at that depth (a 90°
+// image's pixel spans 2 · depth / side), three depth pixels'.
 const float LG_JUMP = 24.0;
 // View depth (along the face's forward axis) of the surface image layer saw at depth pixel
 // at, or -1 where it saw nothing.
