@@ -351,7 +351,7 @@ fn quantise_depth(depth: &[f32], side: usize) -> (usize, Vec<u16>, [f32; 2]) {
             }
         }
     }
-    let near: Vec<f32> = sum
+    let means: Vec<f32> = sum
         .iter()
         .zip(&cnt)
         .map(|(&s, &c)| {
@@ -362,7 +362,7 @@ fn quantise_depth(depth: &[f32], side: usize) -> (usize, Vec<u16>, [f32; 2]) {
             }
         })
         .collect();
-    let finite = near.iter().filter(|d| d.is_finite());
+    let finite = means.iter().filter(|d| d.is_finite());
     let d0 = finite.clone().fold(f32::INFINITY, |a, &b| a.min(b));
     let d1 = finite.fold(f32::NEG_INFINITY, |a, &b| a.max(b));
     let (d0, d1) = if d0.is_finite() {
@@ -375,7 +375,7 @@ fn quantise_depth(depth: &[f32], side: usize) -> (usize, Vec<u16>, [f32; 2]) {
     } else {
         0.0
     };
-    let codes = near
+    let codes = means
         .iter()
         .map(|&d| {
             if d.is_finite() {
@@ -452,19 +452,17 @@ mod tests {
             "{near} < {got} < {far}"
         );
         // On the rim only the covered pixels count.
-        let rim = (0..16 * 16)
-            .find(|&i| {
+        let (rim, covered) = (0..16 * 16)
+            .map(|i| {
                 let (bx, by) = (i % 16, i / 16);
-                let pixels = (0..16).map(|k| d[(4 * by + k / 4) * 64 + 4 * bx + k % 4]);
-                let covered: Vec<f32> = pixels.filter(|x| x.is_finite()).collect();
-                !covered.is_empty() && covered.len() < 16
+                let covered: Vec<f32> = (0..16)
+                    .map(|k| d[(4 * by + k / 4) * 64 + 4 * bx + k % 4])
+                    .filter(|x| x.is_finite())
+                    .collect();
+                (i, covered)
             })
+            .find(|(_, covered)| !covered.is_empty() && covered.len() < 16)
             .expect("a block on the sphere's rim");
-        let (bx, by) = (rim % 16, rim / 16);
-        let covered: Vec<f32> = (0..16)
-            .map(|k| d[(4 * by + k / 4) * 64 + 4 * bx + k % 4])
-            .filter(|x| x.is_finite())
-            .collect();
         let mean = covered.iter().sum::<f32>() / covered.len() as f32;
         let stored = img.depth_at(rim).unwrap();
         assert!((stored - mean).abs() < 1e-4, "rim {stored} vs {mean}");

@@ -96,7 +96,6 @@ float lgNearest(int layer, vec2 uv, vec4 info) {
 // they lie on one surface; across a depth jump or the silhouette, uv's own depth pixel (no
 // depth between an occluder and what lies behind it).
 float lgSeen(int layer, vec2 uv, vec4 info) {
-  float near = lgNearest(layer, uv, info);
   vec2 p = uv * uLgDepthSide - 0.5;
   ivec2 i0 = ivec2(floor(p));
   vec2 fr = p - floor(p);
@@ -104,6 +103,8 @@ float lgSeen(int layer, vec2 uv, vec4 info) {
   float b = lgCode(layer, i0 + ivec2(1, 0), info);
   float c = lgCode(layer, i0 + ivec2(0, 1), info);
   float d = lgCode(layer, i0 + ivec2(1, 1), info);
+  // uv's own depth pixel (lgNearest) is the one of the four it lies nearest to.
+  float near = fr.y < 0.5 ? (fr.x < 0.5 ? a : b) : (fr.x < 0.5 ? c : d);
   if (min(min(a, b), min(c, d)) < 0.0) return near;
   float lo = min(min(a, b), min(c, d));
   float hi = max(max(a, b), max(c, d));
