@@ -9,7 +9,7 @@ use std::path::Path;
 use serde_json::{Value, json};
 
 use crate::harness::*;
-use crate::lod::{names, relief_ply, wait_finished};
+use crate::lod::{names_left, relief_ply, wait_finished};
 
 /// An OBJ relief with a material library (`scan.mtl`): a scan that refers to another file.
 fn obj_with_mtl(n: usize) -> (Vec<u8>, Vec<u8>) {
@@ -107,19 +107,13 @@ fn half_chunk(
     s
 }
 
-/// Only the (empty) folder of upload sessions is left in `uploads/`.
+/// Only the (empty) folder of upload sessions is left in `uploads/` (see [`names_left`]).
 fn nothing_left(data: &Path) {
     let uploads = data.join("uploads");
-    let left: Vec<String> = names(&uploads)
-        .into_iter()
-        .filter(|n| n != "sessions")
-        .collect();
+    let left = names_left(&uploads, |n| n != "sessions");
     assert!(left.is_empty(), "uploads: {left:?}");
-    assert!(
-        names(&uploads.join("sessions")).is_empty(),
-        "sessions: {:?}",
-        names(&uploads.join("sessions"))
-    );
+    let sessions = names_left(&uploads.join("sessions"), |_| true);
+    assert!(sessions.is_empty(), "sessions: {sessions:?}");
 }
 
 #[test]
