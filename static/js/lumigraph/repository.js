@@ -9,8 +9,9 @@
 //   and the lattice is the refinement level whose spacing is at most half its distance to the
 //   target (engine/src/lumigraph/grid.rs, "Refinement levels"; finer levels are kept near the
 //   model only, and their images are rendered on the server when first asked for).
-// - Faces: the fewest images that serve the drawn patches (a greedy cover of sample points of
-//   the patches by the images the shader would weigh within BLEND of the best there).
+// - Faces: the fewest images that serve the drawn patches (a greedy cover of points of the
+//   patches' surfaces within the view by the images the shader would weigh within BLEND of the
+//   best there).
 // - Requests: nearest point first, at most `maxInFlight` at once, `?v=<job>` in the URL so the
 //   browser cache (the images are immutable) never mixes two builds. Empty images (204) are
 //   remembered and not asked again.
@@ -48,6 +49,25 @@ function arrayTexture(side, filter) {
   tex.wrapT = THREE.ClampToEdgeWrapping;
   tex.needsUpdate = true;
   return tex;
+}
+
+/**
+ * Whether a point lies in `camera`'s view (eye, target, up, fovy in degrees, width and height
+ * in pixels), with a margin of a twentieth of the view on each side.
+ */
+export function viewTest(camera) {
+  const e = camera.eye;
+  const f = new THREE.Vector3(camera.target[0] - e[0], camera.target[1] - e[1], camera.target[2] - e[2]).normalize();
+  const r = new THREE.Vector3().crossVectors(f, new THREE.Vector3(...(camera.up ?? [0, 1, 0]))).normalize();
+  const u = new THREE.Vector3().crossVectors(r, f);
+  const ty = 1.1 * Math.tan(((camera.fovy ?? 45) * Math.PI) / 360);
+  const tx = (ty * (camera.width ?? 1)) / Math.max(1, camera.height ?? 1);
+  return (q) => {
+    const d = [q[0] - e[0], q[1] - e[1], q[2] - e[2]];
+    const z = d[0] * f.x + d[1] * f.y + d[2] * f.z;
+    if (z <= 0) return false;
+    return Math.abs(d[0] * r.x + d[1] * r.y + d[2] * r.z) <= tx * z && Math.abs(d[0] * u.x + d[1] * u.y + d[2] * u.z) <= ty * z;
+  };
 }
 
 export class Repository {
@@ -213,9 +233,11 @@ export class Repository {
 
   /**
    * Follows the view: chooses the points for `camera` (its eye), asks for the faces that see
-   * the `drawn` nodes (bounds in `table.bounds`), and starts what fits in flight.
+   * the `drawn` nodes (bounds in `table.bounds`), and starts what fits in flight. `surface`,
+   * where given, returns points on a drawn node's patch (a few of its vertices, as x, y, z
+   * triples) or null where the patch is not resident.
    */
-  update(camera, drawn, table) {
+  update(camera, drawn, table, surface = null) {
     if (this.closed) return;
     const { eye, level } = this.imageEye(camera);
     const moved =
@@ -225,13 +247,18 @@ export class Repository {
       this.lastLevel = level;
       this.assign(this.nearest(eye, camera.target, level, camera.eye));
     }
-    // The faces worth their bytes. At sample points of every drawn patch (its bounding cube's
-    // corners, shrunk by half) an image is good if the shader would weigh it within BLEND of
-    // the best image there (as the shader weighs them: by the angle between the image's ray
-    // and the view's, and 1 / depth²). Images resident or on their way cover their samples;
-    // then, greedily, the image good at most uncovered samples is wanted, until all but
-    // UNCOVERED of them are covered: the few images that serve the view, not every face of
-    // every point that sees some of it (nearby points see nearly the same).
+    // The faces worth their bytes. At sample points of every drawn patch (points of its
+    // surface within the view, or without its geometry its bounding cube's corners, shrunk by
+    // half) an image is good if the shader would weigh it within BLEND of the best image there
+    // (as the shader weighs them: by the angle between the image's ray and the view's, and
+    // 1 / depth²). The face a point asks for is the one the shader picks for it, by the
+    // direction from the image's point, so the samples must lie where the surface does: on a
+    // flat patch the cube's corners lie half its radius above and below it, where they ask for
+    // faces the surface does not need and miss faces it does, and corners outside the view ask
+    // for faces no pixel shows. Images resident or on their way cover their samples; then,
+    // greedily, the image good at most uncovered samples is wanted, until all but UNCOVERED of
+    // them are covered: the few images that serve the view, not every face of every point that
+    // sees some of it (nearby points see nearly the same).
     const b = table.bounds;
     const at = [];
     for (let s = 0; s < SLOTS; s++) {
@@ -245,10 +272,23 @@ export class Repository {
     const samples = [];
     const candidates = new Map();
     const weights = [];
+    const inView = viewTest(camera);
+    const q = [0, 0, 0];
     for (const node of drawn) {
+      const points = surface ? surface(node) : null;
+      const count = points ? points.length / 3 : 8;
       const r = 0.5 * b[node * 4 + 3];
-      for (let k = 0; k < 8; k++) {
-        const q = [b[node * 4] + (k & 1 ? r : -r), b[node * 4 + 1] + (k & 2 ? r : -r), b[node * 4 + 2] + (k & 4 ? r : -r)];
+      for (let k = 0; k < count; k++) {
+        if (points) {
+          q[0] = points[3 * k];
+          q[1] = points[3 * k + 1];
+          q[2] = points[3 * k + 2];
+          if (!inView(q)) continue;
+        } else {
+          q[0] = b[node * 4] + (k & 1 ? r : -r);
+          q[1] = b[node * 4 + 1] + (k & 2 ? r : -r);
+          q[2] = b[node * 4 + 2] + (k & 4 ? r : -r);
+        }
         const e = [q[0] - ce[0], q[1] - ce[1], q[2] - ce[2]];
         const el = Math.hypot(e[0], e[1], e[2]) || 1;
         weights.length = 0;

@@ -367,7 +367,7 @@ class Viewer {
     if (this.view.resize()) this.layoutDirty = true;
     const result = this.streamer.update(this.cameraState());
     this.result = result;
-    if (this.repo && this.mode === 'image') this.repo.update(this.cameraState(), result.draw, this.table);
+    if (this.repo && this.mode === 'image') this.repo.update(this.cameraState(), result.draw, this.table, (node) => this.view.surfacePoints(node));
     this.view.setDrawn(result.draw);
     const drafting = this.selection !== null && this.selection.hasDraft();
     const channel = this.hovered !== null ? 1 : this.selected !== null || drafting ? 2 : 0;

@@ -250,6 +250,8 @@ uniform vec3 uId;
 void main() {
   gl_FragColor = vec4(uId, 1.0);
 }`;
+/** Points of a patch's surface the image repository samples to choose its images. */
+const SURFACE_POINTS = 27;
 /** The visibility pass renders at 1/VISIBILITY_DOWNSCALE of the canvas in each direction. */
 export const VISIBILITY_DOWNSCALE = 2;
 
@@ -473,6 +475,28 @@ export class SceneView {
     }
     mesh.userData[key] = atlasTexture(bitmap);
     this.onChange();
+  }
+
+  /**
+   * Up to SURFACE_POINTS of a resident patch's vertices, spread over its vertex list (x, y, z
+   * triples in world space), or null where the patch is not resident.
+   */
+  surfacePoints(node) {
+    const mesh = this.meshes.get(node);
+    if (!mesh) return null;
+    if (!mesh.userData.surface) {
+      const pos = mesh.geometry.getAttribute('position');
+      const n = Math.min(SURFACE_POINTS, pos.count);
+      const out = new Float32Array(3 * n);
+      for (let k = 0; k < n; k++) {
+        const i = Math.floor(((k + 0.5) * pos.count) / n);
+        out[3 * k] = pos.getX(i);
+        out[3 * k + 1] = pos.getY(i);
+        out[3 * k + 2] = pos.getZ(i);
+      }
+      mesh.userData.surface = out;
+    }
+    return mesh.userData.surface;
   }
 
   removePatch(node) {
