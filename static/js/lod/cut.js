@@ -52,6 +52,14 @@ export function projectedError(view, error, cx, cy, cz, r) {
   return (error * view.pixelScale) / d;
 }
 
+/** Whether a sphere (a point where `r` is 0) lies at least partly inside the view's frustum. */
+export function inFrustum(view, x, y, z, r = 0) {
+  for (const p of view.planes) {
+    if (p[0] * x + p[1] * y + p[2] * z + p[3] < -r) return false;
+  }
+  return true;
+}
+
 function nodeVisible(t, view, i) {
   const b = t.bounds;
   const cx = b[i * 4];
@@ -64,9 +72,7 @@ function nodeVisible(t, view, i) {
   const ty = cy - e[1];
   const tz = cz - e[2];
   if (tx * f[0] + ty * f[1] + tz * f[2] < -r) return false;
-  for (const p of view.planes) {
-    if (p[0] * cx + p[1] * cy + p[2] * cz + p[3] < -r) return false;
-  }
+  if (!inFrustum(view, cx, cy, cz, r)) return false;
   const cutoff = t.cone[i * 4 + 3];
   if (cutoff >= 1) return true;
   const along = tx * t.cone[i * 4] + ty * t.cone[i * 4 + 1] + tz * t.cone[i * 4 + 2];

@@ -20,6 +20,7 @@
 //   it holds an albedo (`layerInfo`), per slot its point (`points`).
 
 import * as THREE from 'three';
+import { inFrustum, makeView } from '../lod/cut.js';
 import { parseImage, pixels } from './image.js';
 
 /** Grid points whose images are resident at once. */
@@ -35,6 +36,8 @@ export const SHARPNESS = 40;
 const BLEND = 0.3;
 /** Share of a view's sample points left to the sparse mesh rather than fetch one more image. */
 const UNCOVERED = 0.02;
+/** Sample points count within the view's field widened by this factor (a twentieth a side). */
+const VIEW_MARGIN = 1.1;
 
 function arrayTexture(side, filter) {
   const data = new Uint8Array(side * side * 4 * LAYERS);
@@ -52,22 +55,12 @@ function arrayTexture(side, filter) {
 }
 
 /**
- * Whether a point lies in `camera`'s view (eye, target, up, fovy in degrees, width and height
- * in pixels), with a margin of a twentieth of the view on each side.
+ * The cut's view of `camera` (lod/cut.js `makeView`: its frustum's planes), the tangents of its
+ * half-fields times VIEW_MARGIN: where the repository keeps its sample points.
  */
-export function viewTest(camera) {
-  const e = camera.eye;
-  const f = new THREE.Vector3(camera.target[0] - e[0], camera.target[1] - e[1], camera.target[2] - e[2]).normalize();
-  const r = new THREE.Vector3().crossVectors(f, new THREE.Vector3(...(camera.up ?? [0, 1, 0]))).normalize();
-  const u = new THREE.Vector3().crossVectors(r, f);
-  const ty = 1.1 * Math.tan(((camera.fovy ?? 45) * Math.PI) / 360);
-  const tx = (ty * (camera.width ?? 1)) / Math.max(1, camera.height ?? 1);
-  return (q) => {
-    const d = [q[0] - e[0], q[1] - e[1], q[2] - e[2]];
-    const z = d[0] * f.x + d[1] * f.y + d[2] * f.z;
-    if (z <= 0) return false;
-    return Math.abs(d[0] * r.x + d[1] * r.y + d[2] * r.z) <= tx * z && Math.abs(d[0] * u.x + d[1] * u.y + d[2] * u.z) <= ty * z;
-  };
+function widenedView(camera) {
+  const fovy = (360 / Math.PI) * Math.atan(VIEW_MARGIN * Math.tan(((camera.fovy ?? 45) * Math.PI) / 360));
+  return makeView({ ...camera, up: camera.up ?? [0, 1, 0], fovy, width: camera.width ?? 1, height: camera.height ?? 1 }, null);
 }
 
 export class Repository {
@@ -272,7 +265,7 @@ export class Repository {
     const samples = [];
     const candidates = new Map();
     const weights = [];
-    const inView = viewTest(camera);
+    const view = widenedView(camera);
     const q = [0, 0, 0];
     for (const node of drawn) {
       const points = surface ? surface(node) : null;
@@ -283,7 +276,7 @@ export class Repository {
           q[0] = points[3 * k];
           q[1] = points[3 * k + 1];
           q[2] = points[3 * k + 2];
-          if (!inView(q)) continue;
+          if (!inFrustum(view, q[0], q[1], q[2])) continue;
         } else {
           q[0] = b[node * 4] + (k & 1 ? r : -r);
           q[1] = b[node * 4 + 1] + (k & 2 ? r : -r);

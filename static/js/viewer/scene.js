@@ -105,8 +105,8 @@ float lgSeen(int layer, vec2 uv, vec4 info) {
   float d = lgCode(layer, i0 + ivec2(1, 1), info);
   // uv's own depth pixel (lgNearest) is the one of the four it lies nearest to.
   float near = fr.y < 0.5 ? (fr.x < 0.5 ? a : b) : (fr.x < 0.5 ? c : d);
-  if (min(min(a, b), min(c, d)) < 0.0) return near;
   float lo = min(min(a, b), min(c, d));
+  if (lo < 0.0) return near;
   float hi = max(max(a, b), max(c, d));
   if (hi - lo > lo * LG_JUMP * uLgPixel) return near;
   return mix(mix(a, b, fr.x), mix(c, d, fr.x), fr.y);
