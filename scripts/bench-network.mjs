@@ -192,7 +192,7 @@ async function run(server, model, path, mode) {
         file('canvas', ours);
         file('server', ref);
       }
-      rows.push({ name: cam.name, settled, ms, bytes: total(done) - before, bytesAfter: total(done), triangles: done.triangles, fps: 1000 / frameMs, ...qual, images: done.lumigraph ? done.lumigraph.images : 0 });
+      rows.push({ name: cam.name, settled, ms, bytes: total(done) - before, bytesAfter: total(done), patchBytes: done.bytes, imageBytes: done.lumigraph ? done.lumigraph.bytes : 0, bytesByLevel: done.bytesByLevel, triangles: done.triangles, fps: 1000 / frameMs, ...qual, images: done.lumigraph ? done.lumigraph.images : 0 });
     }
     return { rows, tableBytes: (await page.evaluate(() => window.meshwikiViewer.stats())).tableBytes };
   } finally {
@@ -279,6 +279,9 @@ async function main() {
       const ssim = res.rows.reduce((s, x) => s + x.ssim, 0) / res.rows.length;
       const fps = res.rows.reduce((s, x) => s + x.fps, 0) / res.rows.length;
       console.log(`    total          ${String(ms).padStart(7)} ms ${mb(bytes)} ${kbs(bytes, ms)}            ${fps.toFixed(1).padStart(6)} ${psnr.toFixed(1).padStart(8)} ${ssim.toFixed(3).padStart(7)}   (means of fps, PSNR, SSIM)`);
+      const last = res.rows[res.rows.length - 1];
+      const levels = (last.bytesByLevel || []).map((b, l) => `${l}: ${(b / 1e3).toFixed(0)}`).join(', ');
+      console.log(`    of which patches ${mb(last.patchBytes).trim()} MB (KB by level, coarsest first: ${levels})${last.imageBytes ? `, images ${mb(last.imageBytes).trim()} MB` : ''}`);
       return { bytes, ms, psnr };
     };
     const a = modelRun && print('model-based', modelRun);

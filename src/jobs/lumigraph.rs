@@ -12,6 +12,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use meshwiki_engine::lod::LodFile;
+use meshwiki_engine::lumigraph::image::Quality;
 use meshwiki_engine::lumigraph::sample::{self, PointImages};
 use meshwiki_engine::lumigraph::{Grid, grid};
 use meshwiki_engine::progress::Progress;
@@ -30,8 +31,11 @@ use crate::store::models;
 pub const DEFAULT_GRID: u32 = 6;
 /// Image side when the request names none (the paper's).
 pub const DEFAULT_SIZE: u32 = 512;
-/// JPEG quality of the albedo and normal images.
-pub const QUALITY: u8 = 80;
+/// How finely the albedo and normal images are coded (`lumigraph::image::Quality`).
+pub const QUALITY: Quality = Quality {
+    albedo: 80,
+    normal_steps: [8, 24],
+};
 
 /// Pixels a repository may hold in all (images × side²): the paper's largest grid, 32³ points
 /// of 512² images, fits; 64³ points of 512² images do not.

@@ -7,7 +7,7 @@ use crate::lod::Culling;
 use crate::render::{Cut, Frame, Outputs, RenderError, RenderModel, RenderOptions, Renderer};
 
 use super::grid::Grid;
-use super::image::{self, ImageError};
+use super::image::{self, ImageError, Quality};
 
 /// Fraction of its pixels every image of a point must show for the point to count as inside
 /// the object (a little under 1: scans are rarely watertight).
@@ -50,14 +50,14 @@ const OUTPUTS: Outputs = Outputs {
 /// Renders and encodes the six images of grid point `key`. Back faces are drawn (a scan is
 /// seen from both sides; the normal faces the camera either way), the albedo is read with
 /// ambient light 1 (no shading), and `with_albedo` false keeps none (a model without colours
-/// or texture: its albedo is the base colour). `quality` is the JPEG quality.
+/// or texture: its albedo is the base colour). `quality`: how finely its sections are coded.
 pub fn sample_point(
     renderer: &Renderer,
     model: &RenderModel,
     grid: &Grid,
     key: [u32; 3],
     with_albedo: bool,
-    quality: u8,
+    quality: Quality,
 ) -> Result<PointImages, SampleError> {
     let options = options();
     let mut frames = Vec::with_capacity(6);
@@ -78,7 +78,7 @@ pub fn sample_point(
     let mut out: [Option<Vec<u8>>; 6] = Default::default();
     for (d, frame) in frames.into_iter().enumerate() {
         if coverage[d] > 0.0 {
-            out[d] = encode(grid.size, &frame, with_albedo, quality)?;
+            out[d] = encode(grid.size, &frame, d / 2, with_albedo, quality)?;
         }
     }
     Ok(PointImages::Images(out))
@@ -94,11 +94,11 @@ pub fn sample_image(
     level: u32,
     [x, y, z, d]: [u32; 4],
     with_albedo: bool,
-    quality: u8,
+    quality: Quality,
 ) -> Result<Option<Vec<u8>>, SampleError> {
     let camera = grid.level_camera(level, [x, y, z], d);
     let frame = renderer.render(model, &camera, &options(), &[])?;
-    encode(grid.size, &frame, with_albedo, quality)
+    encode(grid.size, &frame, d as usize / 2, with_albedo, quality)
 }
 
 fn options() -> RenderOptions {
@@ -119,8 +119,9 @@ fn options() -> RenderOptions {
 fn encode(
     size: u32,
     frame: &Frame,
+    axis: usize,
     with_albedo: bool,
-    quality: u8,
+    quality: Quality,
 ) -> Result<Option<Vec<u8>>, SampleError> {
     let depth = frame
         .depth
@@ -135,5 +136,5 @@ fn encode(
         (true, None) => return Err(SampleError::Missing("colour")),
         (false, _) => None,
     };
-    Ok(image::encode(size, albedo, normal, depth, quality)?)
+    Ok(image::encode(size, albedo, normal, depth, axis, quality)?)
 }

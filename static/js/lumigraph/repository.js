@@ -21,7 +21,7 @@
 
 import * as THREE from 'three';
 import { inFrustum, makeView } from '../lod/cut.js';
-import { parseImage, pixels } from './image.js';
+import { parseImage, pixels, worldOrder } from './image.js';
 
 /** Grid points whose images are resident at once. */
 export const SLOTS = 4;
@@ -413,7 +413,7 @@ export class Repository {
         }
         put(this.albedo, albedo, this.side);
       }
-      put(this.normal, normal, this.side);
+      put(this.normal, img.normalAxis === null ? normal : worldOrder(normal, img.normalAxis), this.side);
       put(this.depth, depth, this.depthSide);
       this.layerInfo[layer].set(1, img.range[0], img.range[1], albedo ? 1 : 0);
       this.loaded.add(w.id);
