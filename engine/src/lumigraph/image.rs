@@ -126,9 +126,9 @@ pub struct Quality {
 /// `u + v = 0`, `fine` from `u + v = 4` on, linear between.
 ///
 /// The shading's error is what a view's PSNR counts, and it weighs every frequency alike,
-/// where the standard tables, made for the eye, quantise fine detail up to six times as
-/// coarsely as the DC (at quality 80: 6 to 40): a scan's fine relief is what its normals
-/// carry. A client resamples an image at another phase than its texels and blends several,
+/// where the standard tables, made for the eye, quantise fine detail up to seven times as
+/// coarsely as the DC (at quality 80, luma: 6 to 48): a scan's fine relief is what its
+/// normals carry. A client resamples an image at another phase than its texels and blends several,
 /// which smooths its finest frequencies, so the steps still grow with frequency, three times
 /// over. On renders of the dragon and of the 5M relief from outside, shading under views
 /// within 25° of the image's ray, both at the images' resolution and smoothed by [1 2 1]²:
