@@ -189,8 +189,7 @@ pub fn encode(
         Some(a) => jpeg(
             a,
             side,
-            quality.albedo,
-            None,
+            Steps::Standard(quality.albedo),
             jpeg_encoder::SamplingFactor::F_2_2,
         )?,
         None => Vec::new(),
@@ -198,8 +197,7 @@ pub fn encode(
     let normal_jpeg = jpeg(
         &normals,
         side,
-        100,
-        Some(normal_table(quality.normal_steps)),
+        Steps::Table(normal_table(quality.normal_steps)),
         jpeg_encoder::SamplingFactor::F_1_1,
     )?;
     let (depth_side, codes, range, m) = quantise_depth(depth, side as usize);
@@ -326,25 +324,36 @@ pub fn decode(bytes: &[u8]) -> Result<LumigraphImage, ImageError> {
     })
 }
 
+/// A JPEG's quantiser steps.
+enum Steps {
+    /// The standard tables at this quality.
+    Standard(u8),
+    /// These steps (natural order, 1 to 255) for every channel.
+    Table([u16; 64]),
+}
+
 /// Baseline JPEG with the standard Huffman tables (see `lod::atlas::encode_jpeg`).
-/// `table`: quantiser steps (natural order, 1 to 255) for every channel instead of the
-/// standard tables at `quality`.
 fn jpeg(
     rgb: &[[u8; 3]],
     side: u32,
-    quality: u8,
-    table: Option<[u16; 64]>,
+    steps: Steps,
     sampling: jpeg_encoder::SamplingFactor,
 ) -> Result<Vec<u8>, ImageError> {
     let s = u16::try_from(side).map_err(|_| ImageError::Malformed("image too large".into()))?;
     let mut out = Vec::new();
-    let mut encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
+    let mut encoder = match steps {
+        Steps::Standard(quality) => jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100)),
+        Steps::Table(t) => {
+            // (The quality scales the built-in tables only.)
+            let mut e = jpeg_encoder::Encoder::new(&mut out, 100);
+            let custom = || {
+                jpeg_encoder::QuantizationTableType::Custom(Box::new(t.map(|v| v.clamp(1, 255))))
+            };
+            e.set_quantization_tables(custom(), custom());
+            e
+        }
+    };
     encoder.set_sampling_factor(sampling);
-    if let Some(t) = table {
-        let custom =
-            || jpeg_encoder::QuantizationTableType::Custom(Box::new(t.map(|v| v.clamp(1, 255))));
-        encoder.set_quantization_tables(custom(), custom());
-    }
     encoder
         .encode(rgb.as_flattened(), s, s, jpeg_encoder::ColorType::Rgb)
         .map_err(|e| ImageError::Malformed(format!("JPEG encoding failed: {e}")))?;
