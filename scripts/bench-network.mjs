@@ -6,9 +6,10 @@
 //                model, system paper §5) —
 // and prints per view and in total: bytes, bytes per second at the link, time to a settled
 // image, frame rate, and PSNR / SSIM of the canvas against the server's full-resolution render
-// of the same camera, with what a view below 30 dB loses it to (detail finer than two pixels,
-// or errors in a small part of the view). The repository's build cost (images, bytes,
-// seconds) comes first.
+// of the same camera, at 1 px (one sample a pixel, as the viewer draws) and 2×2 supersampled
+// (the surface without the aliasing of detail finer than a pixel), with what a view below
+// 30 dB loses it to (detail finer than two pixels, or errors in a small part of the view). The
+// repository's build cost (images, bytes, seconds) comes first.
 // Figures are printed, never asserted.
 // Usage: scripts/bench-network [--mesh FILE] [--mbps N] [--latency MS] [--grid N] [--size S]
 //        [--modes model,image] [--image-px N] (the sparse mesh's pixel error in image mode)
@@ -44,7 +45,10 @@ const TIMED_FRAMES = 10;
  * pixels, which images sampled about a texel a pixel cannot place exactly), and `worstShare`,
  * the share of the squared error in the worst 5% of 16×16 blocks (near 1 when it is local:
  * surface no image covers, seams, silhouettes); `bias`, the mean luminance of the canvas
- * minus the render's (a lighting or colour bias).
+ * minus the render's (a lighting or colour bias). `psnrAa` and `ssimAa`: PSNR and SSIM against
+ * the server's render at twice the size and 0.5 px filtered down to the canvas (2×2 samples a
+ * pixel), and `refAa` the 1 px render's own PSNR against that one (how much aliasing of
+ * detail finer than a pixel the 1 px reference holds).
  */
 function quality(page, url) {
   return page.evaluate(async (url) => {
@@ -58,6 +62,87 @@ function quality(page, url) {
       const g = c.getContext('2d');
       return { g, img };
     };
+    // Figures of the canvas `ours` against a reference `ref` (RGBA, w × h).
+    const compare = (ours, ref, w, h) => {
+      let se = 0;
+      const ya = new Float32Array(w * h);
+      const yb = new Float32Array(w * h);
+      for (let i = 0; i < w * h; i++) {
+        for (let k = 0; k < 3; k++) {
+          const d = ours[i * 4 + k] - ref[i * 4 + k];
+          se += d * d;
+        }
+        ya[i] = 0.299 * ours[i * 4] + 0.587 * ours[i * 4 + 1] + 0.114 * ours[i * 4 + 2];
+        yb[i] = 0.299 * ref[i * 4] + 0.587 * ref[i * 4 + 1] + 0.114 * ref[i * 4 + 2];
+      }
+      const toPsnr = (mse) => (mse > 0 ? 10 * Math.log10((255 * 255) / mse) : Infinity);
+      const mse = se / (w * h * 3);
+      const psnr = toPsnr(mse);
+      let seHalf = 0;
+      const hw = w >> 1;
+      const hh = h >> 1;
+      for (let y = 0; y < hh; y++) {
+        for (let x = 0; x < hw; x++) {
+          for (let k = 0; k < 3; k++) {
+            let d = 0;
+            for (const [dx, dy] of [[0, 0], [1, 0], [0, 1], [1, 1]]) {
+              const i = ((2 * y + dy) * w + 2 * x + dx) * 4 + k;
+              d += ours[i] - ref[i];
+            }
+            seHalf += (d / 4) ** 2;
+          }
+        }
+      }
+      const psnrHalf = toPsnr(seHalf / Math.max(1, hw * hh * 3));
+      const blocks = [];
+      for (let y = 0; y < h; y += 16) {
+        for (let x = 0; x < w; x += 16) {
+          let b = 0;
+          for (let j = y; j < Math.min(h, y + 16); j++) {
+            for (let i = x; i < Math.min(w, x + 16); i++) {
+              for (let k = 0; k < 3; k++) b += (ours[(j * w + i) * 4 + k] - ref[(j * w + i) * 4 + k]) ** 2;
+            }
+          }
+          blocks.push(b);
+        }
+      }
+      blocks.sort((x, y) => y - x);
+      const worst = blocks.slice(0, Math.max(1, Math.round(blocks.length * 0.05))).reduce((a, b) => a + b, 0);
+      const worstShare = se > 0 ? worst / se : 0;
+      // Mean luminance of the canvas minus the render's: a lighting or colour bias.
+      let bias = 0;
+      for (let i = 0; i < w * h; i++) bias += ya[i] - yb[i];
+      bias /= Math.max(1, w * h);
+      const C1 = (0.01 * 255) ** 2;
+      const C2 = (0.03 * 255) ** 2;
+      let ssim = 0;
+      let windows = 0;
+      for (let y = 0; y + 8 <= h; y += 4) {
+        for (let x = 0; x + 8 <= w; x += 4) {
+          let ma = 0, mb = 0;
+          for (let j = 0; j < 8; j++) for (let i = 0; i < 8; i++) {
+            ma += ya[(y + j) * w + x + i];
+            mb += yb[(y + j) * w + x + i];
+          }
+          ma /= 64;
+          mb /= 64;
+          let va = 0, vb = 0, cov = 0;
+          for (let j = 0; j < 8; j++) for (let i = 0; i < 8; i++) {
+            const da = ya[(y + j) * w + x + i] - ma;
+            const db = yb[(y + j) * w + x + i] - mb;
+            va += da * da;
+            vb += db * db;
+            cov += da * db;
+          }
+          va /= 63;
+          vb /= 63;
+          cov /= 63;
+          ssim += ((2 * ma * mb + C1) * (2 * cov + C2)) / ((ma * ma + mb * mb + C1) * (va + vb + C2));
+          windows++;
+        }
+      }
+      return { psnr, psnrHalf, worstShare, bias, ssim: windows ? ssim / windows : 1 };
+    };
     const snap = window.meshwikiViewer.snapshot();
     const probe = new Image();
     probe.src = snap;
@@ -69,90 +154,27 @@ function quality(page, url) {
     const ours = a.g.getImageData(0, 0, w, h).data;
     // The viewer's default background (viewer/scene.js BACKGROUND, 0x1d2026).
     const bg = [29, 32, 38];
-    const b = await load(url.replace('W_', String(w)).replace('H_', String(h)), w, h);
-    b.g.fillStyle = `rgb(${bg[0]}, ${bg[1]}, ${bg[2]})`;
-    b.g.fillRect(0, 0, w, h);
-    b.g.drawImage(b.img, 0, 0, w, h);
+    // The server's render of the canvas' size at `px` (1: one sample a pixel, as the viewer
+    // draws), or of twice its size at 0.5 px filtered down (2×2 samples a pixel: the image of
+    // the full-resolution surface without the aliasing of detail finer than a pixel).
+    const render = async (scale, px) => {
+      const src = url.replace('W_', String(scale * w)).replace('H_', String(scale * h)) + `&px=${px}`;
+      const b = await load(src, w, h);
+      b.g.fillStyle = `rgb(${bg[0]}, ${bg[1]}, ${bg[2]})`;
+      b.g.fillRect(0, 0, w, h);
+      b.g.imageSmoothingEnabled = true;
+      // (Bilinear at exactly half the size: each pixel the mean of its 2 × 2.)
+      b.g.imageSmoothingQuality = 'low';
+      b.g.drawImage(b.img, 0, 0, w, h);
+      return b;
+    };
+    const b = await render(1, 1);
     const ref = b.g.getImageData(0, 0, w, h).data;
-    let se = 0;
-    const ya = new Float32Array(w * h);
-    const yb = new Float32Array(w * h);
-    for (let i = 0; i < w * h; i++) {
-      for (let k = 0; k < 3; k++) {
-        const d = ours[i * 4 + k] - ref[i * 4 + k];
-        se += d * d;
-      }
-      ya[i] = 0.299 * ours[i * 4] + 0.587 * ours[i * 4 + 1] + 0.114 * ours[i * 4 + 2];
-      yb[i] = 0.299 * ref[i * 4] + 0.587 * ref[i * 4 + 1] + 0.114 * ref[i * 4 + 2];
-    }
-    const toPsnr = (mse) => (mse > 0 ? 10 * Math.log10((255 * 255) / mse) : Infinity);
-    const mse = se / (w * h * 3);
-    const psnr = toPsnr(mse);
-    let seHalf = 0;
-    const hw = w >> 1;
-    const hh = h >> 1;
-    for (let y = 0; y < hh; y++) {
-      for (let x = 0; x < hw; x++) {
-        for (let k = 0; k < 3; k++) {
-          let d = 0;
-          for (const [dx, dy] of [[0, 0], [1, 0], [0, 1], [1, 1]]) {
-            const i = ((2 * y + dy) * w + 2 * x + dx) * 4 + k;
-            d += ours[i] - ref[i];
-          }
-          seHalf += (d / 4) ** 2;
-        }
-      }
-    }
-    const psnrHalf = toPsnr(seHalf / Math.max(1, hw * hh * 3));
-    const blocks = [];
-    for (let y = 0; y < h; y += 16) {
-      for (let x = 0; x < w; x += 16) {
-        let b = 0;
-        for (let j = y; j < Math.min(h, y + 16); j++) {
-          for (let i = x; i < Math.min(w, x + 16); i++) {
-            for (let k = 0; k < 3; k++) b += (ours[(j * w + i) * 4 + k] - ref[(j * w + i) * 4 + k]) ** 2;
-          }
-        }
-        blocks.push(b);
-      }
-    }
-    blocks.sort((x, y) => y - x);
-    const worst = blocks.slice(0, Math.max(1, Math.round(blocks.length * 0.05))).reduce((a, b) => a + b, 0);
-    const worstShare = se > 0 ? worst / se : 0;
-    // Mean luminance of the canvas minus the render's: a lighting or colour bias.
-    let bias = 0;
-    for (let i = 0; i < w * h; i++) bias += ya[i] - yb[i];
-    bias /= Math.max(1, w * h);
-    const C1 = (0.01 * 255) ** 2;
-    const C2 = (0.03 * 255) ** 2;
-    let ssim = 0;
-    let windows = 0;
-    for (let y = 0; y + 8 <= h; y += 4) {
-      for (let x = 0; x + 8 <= w; x += 4) {
-        let ma = 0, mb = 0;
-        for (let j = 0; j < 8; j++) for (let i = 0; i < 8; i++) {
-          ma += ya[(y + j) * w + x + i];
-          mb += yb[(y + j) * w + x + i];
-        }
-        ma /= 64;
-        mb /= 64;
-        let va = 0, vb = 0, cov = 0;
-        for (let j = 0; j < 8; j++) for (let i = 0; i < 8; i++) {
-          const da = ya[(y + j) * w + x + i] - ma;
-          const db = yb[(y + j) * w + x + i] - mb;
-          va += da * da;
-          vb += db * db;
-          cov += da * db;
-        }
-        va /= 63;
-        vb /= 63;
-        cov /= 63;
-        ssim += ((2 * ma * mb + C1) * (2 * cov + C2)) / ((ma * ma + mb * mb + C1) * (va + vb + C2));
-        windows++;
-      }
-    }
+    const fine = (await render(2, 0.5)).g.getImageData(0, 0, w, h).data;
+    const at1 = compare(ours, ref, w, h);
+    const at2 = compare(ours, fine, w, h);
     const png = (g) => g.canvas.toDataURL('image/png');
-    return { psnr, psnrHalf, worstShare, bias, ssim: windows ? ssim / windows : 1, width: w, height: h, ours: png(a.g), ref: png(b.g) };
+    return { ...at1, psnrAa: at2.psnr, ssimAa: at2.ssim, refAa: compare(ref, fine, w, h).psnr, width: w, height: h, ours: png(a.g), ref: png(b.g) };
   }, url);
 }
 
@@ -259,34 +281,38 @@ async function main() {
 
     const print = (label, res) => {
       console.log(`\n  ${label} (hierarchy tables ${mb(res.tableBytes)} MB)`);
-      console.log(`    view           settled in   MB     KB/s   triangles    fps   PSNR dB   SSIM  ½-res dB  worst 5%   (> not settled: figures at the timeout)`);
+      console.log(`    view           settled in   MB     KB/s   triangles    fps   PSNR dB   SSIM  ½-res dB  worst 5% │ 2×2: PSNR dB   SSIM  1 px render   (> not settled: figures at the timeout)`);
       for (const row of res.rows) {
-        console.log(`    ${row.name.padEnd(14)}${row.settled ? ' ' : '>'}${String(row.ms).padStart(7)} ms ${mb(row.bytes)} ${kbs(row.bytes, row.ms)} ${String(row.triangles).padStart(10)} ${row.fps.toFixed(1).padStart(6)} ${row.psnr.toFixed(1).padStart(8)} ${row.ssim.toFixed(3).padStart(7)} ${row.psnrHalf.toFixed(1).padStart(8)} ${(100 * row.worstShare).toFixed(0).padStart(8)}%${row.images ? `   ${row.images} images so far` : ''}`);
+        console.log(`    ${row.name.padEnd(14)}${row.settled ? ' ' : '>'}${String(row.ms).padStart(7)} ms ${mb(row.bytes)} ${kbs(row.bytes, row.ms)} ${String(row.triangles).padStart(10)} ${row.fps.toFixed(1).padStart(6)} ${row.psnr.toFixed(1).padStart(8)} ${row.ssim.toFixed(3).padStart(7)} ${row.psnrHalf.toFixed(1).padStart(8)} ${(100 * row.worstShare).toFixed(0).padStart(8)}% │ ${row.psnrAa.toFixed(1).padStart(12)} ${row.ssimAa.toFixed(3).padStart(6)} ${row.refAa.toFixed(1).padStart(12)}${row.images ? `   ${row.images} images so far` : ''}`);
       }
+      console.log(`    (PSNR, SSIM: against the server's render of the same camera at 1 px, one sample a pixel; 2×2: against its render at twice the size and 0.5 px, filtered down to the canvas: the full-resolution surface without the aliasing of detail finer than a pixel, where "1 px render" is the first render's own PSNR against it)`);
       // Why a view is below the target of 30 dB, from the figures above.
       for (const row of res.rows.filter((r) => r.psnr < 30)) {
         const why = [];
         if (!row.settled) why.push('not settled at the timeout');
         if (row.psnrHalf - row.psnr >= 3) why.push(`detail finer than 2 px (${row.psnrHalf.toFixed(1)} dB at half resolution)`);
         if (row.worstShare >= 0.4) why.push(`local: ${(100 * row.worstShare).toFixed(0)}% of the error in 5% of the view (uncovered surface, seams, silhouettes)`);
+        if (row.refAa < 35) why.push(`the 1 px render aliases detail finer than a pixel: it is itself ${row.refAa.toFixed(1)} dB from the 2×2 render, the canvas ${row.psnrAa.toFixed(1)} dB`);
         if (Math.abs(row.bias) >= 4) why.push(`${row.bias > 0 ? 'brighter' : 'darker'} than the render by ${Math.abs(row.bias).toFixed(1)} of 255 on average`);
         if (!why.length) why.push('differs throughout the view, at scales above two pixels and without a brightness bias');
         console.log(`    ${row.name}: ${row.psnr.toFixed(1)} dB: ${why.join('; ')}`);
       }
       const bytes = res.rows.reduce((s, x) => s + x.bytes, 0);
       const ms = res.rows.reduce((s, x) => s + x.ms, 0);
-      const psnr = res.rows.reduce((s, x) => s + x.psnr, 0) / res.rows.length;
-      const ssim = res.rows.reduce((s, x) => s + x.ssim, 0) / res.rows.length;
-      const fps = res.rows.reduce((s, x) => s + x.fps, 0) / res.rows.length;
-      console.log(`    total          ${String(ms).padStart(7)} ms ${mb(bytes)} ${kbs(bytes, ms)}            ${fps.toFixed(1).padStart(6)} ${psnr.toFixed(1).padStart(8)} ${ssim.toFixed(3).padStart(7)}   (means of fps, PSNR, SSIM)`);
+      const mean = (f) => res.rows.reduce((s, x) => s + f(x), 0) / res.rows.length;
+      const psnr = mean((x) => x.psnr);
+      const ssim = mean((x) => x.ssim);
+      const fps = mean((x) => x.fps);
+      const psnrAa = mean((x) => x.psnrAa);
+      console.log(`    total          ${String(ms).padStart(7)} ms ${mb(bytes)} ${kbs(bytes, ms)}            ${fps.toFixed(1).padStart(6)} ${psnr.toFixed(1).padStart(8)} ${ssim.toFixed(3).padStart(7)}                    │ ${psnrAa.toFixed(1).padStart(12)} ${mean((x) => x.ssimAa).toFixed(3).padStart(6)} ${mean((x) => x.refAa).toFixed(1).padStart(12)}   (means of fps, PSNR, SSIM)`);
       const last = res.rows[res.rows.length - 1];
       const levels = (last.bytesByLevel || []).map((b, l) => `${l}: ${(b / 1e3).toFixed(0)}`).join(', ');
       console.log(`    of which patches ${mb(last.patchBytes).trim()} MB (KB by level, coarsest first: ${levels})${last.imageBytes ? `, images ${mb(last.imageBytes).trim()} MB` : ''}`);
-      return { bytes, ms, psnr };
+      return { bytes, ms, psnr, psnrAa };
     };
     const a = modelRun && print('model-based', modelRun);
     const b = imageRun && print(`image-based${IMAGE_PX ? `, sparse mesh at ${IMAGE_PX} px` : ''}`, imageRun);
-    if (a && b) console.log(`\n  image-based / model-based: bytes ${(b.bytes / a.bytes).toFixed(2)}×, time ${(b.ms / a.ms).toFixed(2)}×; image-based averages ${kbs(b.bytes, b.ms).trim()} KB/s at the link, mean PSNR ${b.psnr.toFixed(1)} dB (model-based ${a.psnr.toFixed(1)} dB)`);
+    if (a && b) console.log(`\n  image-based / model-based: bytes ${(b.bytes / a.bytes).toFixed(2)}×, time ${(b.ms / a.ms).toFixed(2)}×; image-based averages ${kbs(b.bytes, b.ms).trim()} KB/s at the link, mean PSNR ${b.psnr.toFixed(1)} dB (model-based ${a.psnr.toFixed(1)} dB), ${b.psnrAa.toFixed(1)} dB against the 2×2 render (model-based ${a.psnrAa.toFixed(1)} dB)`);
     console.log(`  scan file ${mb(statSync(mesh.path).size)} MB`);
   } finally {
     await server.stop();
