@@ -252,7 +252,7 @@ const SQUARE = {
  * residuals. `texture`: with the image section and the coordinate stream; `compression`: the
  * header byte (the payload is stored uncompressed either way; tests decompress it themselves).
  */
-function encodeSquare(encoder, decoder, { texture, image = fakeJpeg(64, 48), normalMap = null, compression = 0 }) {
+function encodeSquare(encoder, decoder, { texture, image = fakeJpeg(64, 48), normalMap = null, compression = 0, charts = null }) {
   const n = SQUARE.grid.length;
   const t = SQUARE.indices.length / 3;
   const idxS = encoder.encodeIndexBuffer(new Uint8Array(Uint32Array.from(SQUARE.indices).buffer), t * 3, 4);
@@ -272,9 +272,14 @@ function encodeSquare(encoder, decoder, { texture, image = fakeJpeg(64, 48), nor
   const norS = new Uint8Array(2 * n);
   const uvBytes = new Uint8Array(n * 4);
   SQUARE.uvs.forEach(([u, v], i) => uvBytes.set([u & 255, u >> 8, v & 255, v >> 8], i * 4));
-  const uvS = texture ? encoder.encodeVertexBuffer(uvBytes, n, 4) : new Uint8Array(0);
+  let uvS = texture ? encoder.encodeVertexBuffer(uvBytes, n, 4) : new Uint8Array(0);
+  if (charts) {
+    // Texture coordinates by chart (payload flag bit 4): a u32 count, then eight f32 a chart.
+    const maps = new Uint8Array(new Float32Array(charts.flat()).buffer);
+    uvS = Uint8Array.from([...u32le(charts.length), ...maps]);
+  }
   const streams = [idxS, Uint8Array.from(posS), Uint8Array.from(idsS), colS, norS, uvS];
-  const flags = 1 | 2 | (texture ? 4 : 0);
+  const flags = 1 | 2 | (texture || charts ? 4 : 0) | (charts ? 16 : 0);
   const header = [...u32le(n), ...u32le(t), ...u32le(flags), ...u32le(0), ...SQUARE.min.flatMap(u32le), ...streams.flatMap((s) => u32le(s.length))];
   assert.equal(header.length, 52);
   const payload = Uint8Array.from([...header, ...streams.flatMap((s) => Array.from(s))]);
@@ -404,6 +409,44 @@ test('textured blobs that do not decode are errors (hand-built)', async () => {
   const noUvs = encodeSquare(encoder, deps.meshopt, { texture: false }).blob.slice();
   noUvs[12 + 8] |= 4;
   assert.throws(() => decodePatch(noUvs, grid, deps), (e) => e instanceof DecodeError && /uvs/.test(e.message), `${n} vertices, no stream`);
+});
+
+test('texture coordinates by chart: one affine map per chart, bit for bit (hand-built)', async () => {
+  const deps = await decoderDeps();
+  const encoder = await encoderDeps();
+  const grid = { origin: [0, 0, 0], step: 1 };
+  // The square's two triangles share no vertex (4 and 5 are copies of 1 and 2): two charts,
+  // numbered by their first triangle. Maps with coefficients that do not round evenly.
+  const charts = [
+    [0.1, 0.0, 0.0, 0.25, 0.0, 0.2, 0.01, 0.1],
+    [-0.03, 0.07, 0.3, 0.6, 0.011, -0.05, 0.2, 0.5],
+  ];
+  const { blob, payload } = encodeSquare(encoder, deps.meshopt, { texture: true, charts });
+  const p = decodePatch(blob, grid, deps);
+  const f = Float32Array.from(charts.flat());
+  // Chart of each vertex: its triangle's place in the decoded index buffer.
+  const chartOf = new Int32Array(p.vertexCount).fill(-1);
+  for (let i = 0; i < p.indices.length; i++) chartOf[p.indices[i]] = Math.floor(i / 3);
+  for (let v = 0; v < p.vertexCount; v++) {
+    const [x, y, z] = [0, 1, 2].map((k) => p.gridPositions[v * 3 + k] - SQUARE.min[k]);
+    const c = chartOf[v];
+    for (let k = 0; k < 2; k++) {
+      const m = c * 8 + k * 4;
+      const want = Math.fround(((f[m] * x + f[m + 1] * y) + f[m + 2] * z) + f[m + 3]);
+      assert.equal(p.uvs[v * 2 + k], want, `vertex ${v} coordinate ${k}`);
+    }
+  }
+  // Everything else decodes as with coordinates per vertex.
+  assert.deepEqual(geometry(p), geometry(decodePatch(encodeSquare(encoder, deps.meshopt, { texture: true }).blob, grid, deps)));
+  // A chart count that is not the triangles' is an error.
+  for (const bad of [charts.slice(0, 1), [...charts, charts[0]]]) {
+    const b = encodeSquare(encoder, deps.meshopt, { texture: true, charts: bad }).blob;
+    assert.throws(() => decodePatch(b, grid, deps), (e) => e instanceof DecodeError && /uvs/.test(e.message), `${bad.length} charts`);
+  }
+  // The chart flag without the texture coordinates flag is an error.
+  const noUvFlag = blob.slice();
+  noUvFlag[blob.length - payload.length + 8] &= ~4;
+  assert.throws(() => decodePatch(noUvFlag, grid, deps), DecodeError);
 });
 
 test('JPEG sizes come from the frame header', () => {

@@ -28,8 +28,10 @@
 //!   atlas, so a vertex where the atlas' charts meet is stored once per chart (the same
 //!   original ID and grid position each time: such copies sit on chart-border edges, which
 //!   count as patch border, so they keep full precision and stored normals and decode to the
-//!   same point). Coordinates are u16 pairs through meshoptimizer's vertex codec; the atlas
-//!   image (JPEG) travels in front of the compressed payload, as it is compressed already.
+//!   same point). Coordinates are one affine map per chart of the atlas, applied to the
+//!   decoded positions ([`super::chart_uv`]), or, where the charts are not projections, u16
+//!   pairs through meshoptimizer's vertex codec; the atlas image (JPEG) travels in front of
+//!   the compressed payload, as it is compressed already.
 //! - The payload is compressed with zstd when that makes it smaller: range-coded streams
 //!   do not gain, so `MWP3` payloads without meshoptimizer streams (texture coordinates) are
 //!   stored as they are, without trying.
@@ -39,6 +41,7 @@ use meshopt::{
 };
 use rustc_hash::FxHashMap as HashMap;
 
+use super::chart_uv;
 use super::frontcoder::{self, Prediction};
 use super::jpegtables;
 use super::parallelogram::{Parallelograms, predict};
@@ -59,7 +62,10 @@ const FLAG_UVS: u32 = 4;
 /// `MWP3` payload flag: the ids stream lists the ids in the Morton order of the vertices'
 /// decoded grid points ([`morton_sequence`]) instead of predicting them along the traversal.
 const FLAG_SORTED_IDS: u32 = 8;
-const KNOWN_FLAGS: u32 = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS;
+/// Payload flag (with [`FLAG_UVS`]): the texture coordinates stream holds one affine map per
+/// atlas chart instead of coordinates per vertex ([`super::chart_uv`]).
+const FLAG_CHART_UVS: u32 = 16;
+const KNOWN_FLAGS: u32 = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS | FLAG_CHART_UVS;
 /// Blob header flag (byte 5): an image section (the colour atlas) follows the 12-byte header.
 const BLOB_IMAGE: u8 = 1;
 /// Blob header flag (byte 5): a normal-map section follows (after the image section, if any).
@@ -852,10 +858,28 @@ fn encode_split(
         normal_stream = sink.finish();
     }
 
-    let uv_stream = uvs
-        .as_ref()
-        .map(|u| encode_vertex_buffer(u).unwrap_or_default())
-        .unwrap_or_default();
+    // Texture coordinates: one map per chart where every chart is a projection (the build's
+    // atlases), else per vertex.
+    let maps = uvs.as_ref().and_then(|u| {
+        let exact: Vec<[i64; 3]> = grid
+            .iter()
+            .map(|g| std::array::from_fn(|k| (g[k] - min[k]) as i64))
+            .collect();
+        let targets: Vec<[f64; 2]> = u.iter().map(|q| q.map(|x| x as f64 / 65535.0)).collect();
+        chart_uv::fit(&indices, &exact, &decoded_pos, shift, &targets)
+    });
+    let uv_stream = match (&maps, &uvs) {
+        (Some(maps), _) => {
+            let mut out = Vec::with_capacity(4 + maps.len() * 32);
+            out.extend_from_slice(&(maps.len() as u32).to_le_bytes());
+            for c in maps.iter().flatten() {
+                out.extend_from_slice(&c.to_le_bytes());
+            }
+            out
+        }
+        (None, Some(u)) => encode_vertex_buffer(u).unwrap_or_default(),
+        (None, None) => Vec::new(),
+    };
 
     let mut flags = 0;
     if colors.is_some() {
@@ -863,6 +887,9 @@ fn encode_split(
     }
     if uvs.is_some() {
         flags |= FLAG_UVS;
+    }
+    if maps.is_some() {
+        flags |= FLAG_CHART_UVS;
     }
 
     if normals.is_some() {
@@ -902,7 +929,7 @@ fn encode_split(
     // Range-coded streams alone leave zstd nothing to find (no `MWP3` blob of the dragon,
     // igea, the gargoyle or the 5M relief gained), so only payloads with meshoptimizer's
     // streams (`MWP2`, texture coordinates) try it: 2-3% of a build's CPU time otherwise.
-    let try_zstd = zstd_level > 0 && (!v3 || uvs.is_some());
+    let try_zstd = zstd_level > 0 && (!v3 || (uvs.is_some() && maps.is_none()));
     let (compression, body) = match try_zstd.then(|| zstd::bulk::compress(&payload, zstd_level)) {
         Some(Ok(c)) if c.len() < payload.len() => (COMPRESSION_ZSTD, c),
         _ => (COMPRESSION_NONE, payload.clone()),
@@ -1186,7 +1213,10 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     let flags = u32_at(&payload, 8)?;
     let shift = u32_at(&payload, 12)?;
     let sorted = flags & FLAG_SORTED_IDS != 0;
-    if flags & !KNOWN_FLAGS != 0 || (sorted && !v3) {
+    if flags & !KNOWN_FLAGS != 0
+        || (sorted && !v3)
+        || (flags & FLAG_CHART_UVS != 0 && flags & FLAG_UVS == 0)
+    {
         return Err(CodecError::Flags(flags));
     }
     if vertex_count > MAX_ELEMENTS
@@ -1354,7 +1384,9 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     } else {
         Vec::new()
     };
-    let uvs = if flags & FLAG_UVS != 0 {
+    let uvs = if flags & FLAG_CHART_UVS != 0 {
+        chart_uvs(uv_s, &indices, &pos)?
+    } else if flags & FLAG_UVS != 0 {
         let q: Vec<[u16; 2]> =
             decode_vertex_buffer(uv_s, n).map_err(|_| CodecError::Stream("uvs"))?;
         q.iter().map(|q| q.map(|x| x as f32 / 65535.0)).collect()
@@ -1373,6 +1405,41 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         image,
         normal_map,
     })
+}
+
+/// Texture coordinates from a stream of chart maps (payload flag bit 4): a u32 count, then
+/// eight little-endian f32 per chart ([`chart_uv`]). `pos`: decoded grid positions relative to
+/// the patch minimum.
+fn chart_uvs(
+    stream: &[u8],
+    indices: &[u32],
+    pos: &[[i64; 3]],
+) -> Result<Vec<[f32; 2]>, CodecError> {
+    let bad = || CodecError::Stream("uvs");
+    let count = u32_at(stream, 0).map_err(|_| bad())? as usize;
+    if stream.len() != 4 + count.checked_mul(32).ok_or_else(bad)? {
+        return Err(bad());
+    }
+    let maps: Vec<chart_uv::ChartMap> = stream[4..]
+        .chunks_exact(32)
+        .map(|c| {
+            std::array::from_fn(|k| {
+                f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])
+            })
+        })
+        .collect();
+    let (chart, charts) = chart_uv::charts(indices, pos.len());
+    if charts != count {
+        return Err(bad());
+    }
+    Ok(chart
+        .iter()
+        .zip(pos)
+        .map(|(&c, &p)| {
+            maps.get(c as usize)
+                .map_or([0.0; 2], |m| chart_uv::evaluate(m, p))
+        })
+        .collect())
 }
 
 /// Area-weighted vertex normals of a triangle set in world space (unit length; +Z for
@@ -1604,6 +1671,7 @@ mod tests {
         assert_eq!(p.positions.len(), 12 * 12 + 12);
         assert_eq!(vertices, p.positions.len());
         assert_eq!(p.uvs.len(), p.positions.len());
+        let mut moved = false;
         for (k, &v) in p.indices.iter().enumerate() {
             let id = p.original_ids[v as usize];
             let local = ids.iter().position(|&i| i == id).expect("an input id") as u32;
@@ -1616,7 +1684,11 @@ mod tests {
             for k in 0..3 {
                 assert!((copies[0][k] as i64 - gp[local as usize][k] as i64).abs() <= 8);
             }
-            let (x, y) = ((local % 12) as f32, (local / 12) as f32);
+            // The coordinates are the charts' maps at the decoded position: the texture stays
+            // where the surface was while an interior vertex moves by its quantisation.
+            let g = p.grid_positions[v as usize];
+            let (x, y) = ((g[0] as f32 - 5.0) / 37.0, (g[1] as f32 - 9.0) / 41.0);
+            moved |= g != gp[local as usize];
             let tri = &p.indices[k / 3 * 3..k / 3 * 3 + 3];
             let right = tri
                 .iter()
@@ -1635,7 +1707,42 @@ mod tests {
                 [x / 12.0, y / 12.0]
             };
             let got = p.uvs[v as usize];
-            assert!((got[0] - want[0]).abs() < 1e-4 && (got[1] - want[1]).abs() < 1e-4);
+            // Within the fit of a chart whose heights scatter (a unit is 1/444 across).
+            let tolerance = if g == gp[local as usize] { 1e-4 } else { 1e-3 };
+            assert!(
+                (got[0] - want[0]).abs() < tolerance && (got[1] - want[1]).abs() < tolerance,
+                "vertex {v} at {g:?} (input {:?}): {got:?}, want {want:?}",
+                gp[local as usize]
+            );
+        }
+        assert!(moved, "some interior vertex is quantised");
+        // Coordinates that are no chart's projection are stored per vertex, as given.
+        let bent: Vec<[f32; 2]> = corner_uvs
+            .iter()
+            .map(|&[u, v]| [u, 0.9 * v + 0.03 + 0.02 * (40.0 * u).sin()])
+            .collect();
+        let (bent_blob, _) = encode_counted(
+            &PatchRef {
+                texture: Some((&bent, &image)),
+                ..patch
+            },
+            3,
+        );
+        let q = decode(&bent_blob, &grid).expect("decodes");
+        assert!(
+            bent_blob.len() > blob.len() + 200,
+            "{} {}",
+            bent_blob.len(),
+            blob.len()
+        );
+        for (v, got) in q.uvs.iter().enumerate() {
+            let id = q.original_ids[v];
+            let given = indices.iter().zip(&bent).any(|(&w, want)| {
+                ids[w as usize] == id
+                    && (got[0] - want[0]).abs() < 1e-4
+                    && (got[1] - want[1]).abs() < 1e-4
+            });
+            assert!(given, "vertex {v}: {got:?}");
         }
         // Untextured blobs have neither.
         let plain = decode(

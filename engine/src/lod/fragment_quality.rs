@@ -193,10 +193,7 @@ fn texture_density(image: &Texture, uvs: &[[f32; 2]]) -> (f32, u64) {
 pub fn coverage(w: usize, h: usize, uvs: &[[f32; 2]]) -> Vec<bool> {
     let mut covered = vec![false; w * h];
     for t in uvs.chunks_exact(3) {
-        let c: Vec<[f32; 2]> = t
-            .iter()
-            .map(|uv| [uv[0] * w as f32, uv[1] * h as f32])
-            .collect();
+        let c: [[f32; 2]; 3] = std::array::from_fn(|k| [t[k][0] * w as f32, t[k][1] * h as f32]);
         let centroid = [
             (c[0][0] + c[1][0] + c[2][0]) / 3.0,
             (c[0][1] + c[1][1] + c[2][1]) / 3.0,

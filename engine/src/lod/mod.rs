@@ -8,6 +8,7 @@ pub mod atlas;
 pub mod bounds;
 mod buckets;
 pub mod build;
+pub mod chart_uv;
 pub mod codec;
 pub mod cut;
 pub mod export;

@@ -70,10 +70,25 @@ pub fn srgb_to_linear(c: u8) -> f32 {
     SRGB_TO_LINEAR[c as usize]
 }
 
-/// Linear light (clamped to [0, 1]) to an sRGB byte.
+/// Linear light (clamped to [0, 1]) to an sRGB byte: the byte `linear_to_srgb_curve` gives,
+/// found among the 255 thresholds where that byte changes instead of through `powf` (a few per
+/// cent of a textured build, which encodes every atlas texel).
 #[inline]
 pub fn linear_to_srgb(l: f32) -> u8 {
     let l = if l.is_nan() { 0.0 } else { l.clamp(0.0, 1.0) };
+    let (thresholds, buckets) = &*SRGB_THRESHOLDS;
+    let mut b = buckets[(l * SRGB_BUCKETS as f32) as usize] as usize;
+    while b > 0 && l < thresholds[b] {
+        b -= 1;
+    }
+    while b < 255 && l >= thresholds[b + 1] {
+        b += 1;
+    }
+    b as u8
+}
+
+/// The sRGB curve (IEC 61966-2-1) of linear light in [0, 1], rounded to a byte.
+fn linear_to_srgb_curve(l: f32) -> u8 {
     let c = if l <= 0.003_130_8 {
         l * 12.92
     } else {
@@ -81,6 +96,34 @@ pub fn linear_to_srgb(l: f32) -> u8 {
     };
     (c * 255.0 + 0.5) as u8
 }
+
+/// Buckets of [`SRGB_THRESHOLDS`]' start table over [0, 1].
+const SRGB_BUCKETS: usize = 4096;
+
+/// For each byte `k`, the least `l` in [0, 1] that [`linear_to_srgb_curve`] takes to `k` or
+/// more (bisected over the bit patterns of positive floats, which order as the floats do); and
+/// the byte at the start of each of [`SRGB_BUCKETS`] equal buckets of [0, 1] (one more for 1).
+#[allow(clippy::type_complexity)]
+static SRGB_THRESHOLDS: LazyLock<([f32; 256], [u8; SRGB_BUCKETS + 1])> = LazyLock::new(|| {
+    let mut thresholds = [0f32; 256];
+    for (k, t) in thresholds.iter_mut().enumerate().skip(1) {
+        let (mut lo, mut hi) = (0u32, 1f32.to_bits());
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if usize::from(linear_to_srgb_curve(f32::from_bits(mid))) >= k {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        *t = f32::from_bits(lo);
+    }
+    let mut buckets = [0u8; SRGB_BUCKETS + 1];
+    for (i, b) in buckets.iter_mut().enumerate() {
+        *b = linear_to_srgb_curve((i as f32 / SRGB_BUCKETS as f32).min(1.0));
+    }
+    (thresholds, buckets)
+});
 
 /// Linear RGBA (alpha linear too) to sRGB RGBA bytes.
 pub fn encode_rgba(l: [f32; 4]) -> [u8; 4] {
@@ -248,6 +291,23 @@ mod tests {
         for c in 0..=255u8 {
             assert_eq!(linear_to_srgb(srgb_to_linear(c)), c);
         }
+    }
+
+    #[test]
+    fn srgb_encoding_by_thresholds_is_the_curve() {
+        // Every 251st float in [0, 1], each threshold and its neighbours, and out of range.
+        let one = 1f32.to_bits();
+        let thresholds = SRGB_THRESHOLDS.0;
+        let near = thresholds[1..]
+            .iter()
+            .flat_map(|t| [t.to_bits() - 1, t.to_bits(), t.to_bits() + 1]);
+        for bits in (0..=one).step_by(251).chain(near).chain([one]) {
+            let l = f32::from_bits(bits);
+            assert_eq!(linear_to_srgb(l), linear_to_srgb_curve(l), "{l:e}");
+        }
+        assert_eq!(linear_to_srgb(-0.5), 0);
+        assert_eq!(linear_to_srgb(7.0), 255);
+        assert_eq!(linear_to_srgb(f32::NAN), 0);
     }
 
     #[test]

@@ -29,7 +29,9 @@ const FLAG_NORMALS = 2;
 const FLAG_UVS = 4;
 /** `MWP3` payload flag: ids listed in the Morton order of the decoded grid points. */
 const FLAG_SORTED_IDS = 8;
-const KNOWN_FLAGS = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS;
+/** Payload flag (with `FLAG_UVS`): texture coordinates as one affine map per atlas chart. */
+const FLAG_CHART_UVS = 16;
+const KNOWN_FLAGS = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS | FLAG_CHART_UVS;
 /** Blob header flag (byte 5): an image section (u32 length, then the JPEG) follows byte 12. */
 const BLOB_IMAGE = 1;
 /** Blob header flag (byte 5): a normal-map section (u32 length, then the JPEG) follows. */
@@ -548,6 +550,67 @@ function normalAxis(pos, a, b, c) {
 }
 
 /**
+ * Each vertex's atlas chart (engine `chart_uv::charts`): triangles that share a vertex are one
+ * chart, numbered by their first triangle; a vertex no triangle uses gets -1.
+ * @returns {{chart: Int32Array, count: number}}
+ */
+function charts(indices, n) {
+  const parent = new Uint32Array(n);
+  for (let v = 0; v < n; v++) parent[v] = v;
+  const find = (v) => {
+    while (parent[v] !== v) {
+      parent[v] = parent[parent[v]];
+      v = parent[v];
+    }
+    return v;
+  };
+  for (let i = 0; i + 2 < indices.length; i += 3) {
+    for (let k = 1; k < 3; k++) {
+      const a = find(indices[i]);
+      const b = find(indices[i + k]);
+      parent[Math.max(a, b)] = Math.min(a, b);
+    }
+  }
+  const label = new Int32Array(n).fill(-1);
+  let count = 0;
+  for (let i = 0; i + 2 < indices.length; i += 3) {
+    const r = find(indices[i]);
+    if (label[r] < 0) label[r] = count++;
+  }
+  const chart = new Int32Array(n);
+  for (let v = 0; v < n; v++) chart[v] = label[find(v)];
+  return { chart, count };
+}
+
+/**
+ * Texture coordinates from chart maps (payload flag bit 4, docs/FORMAT.md): a u32 count, then
+ * per chart eight f32 `a0 a1 a2 t` for u and for v; a vertex's coordinate is
+ * `fround(((a0·x + a1·y) + a2·z) + t)` in doubles, of its grid position relative to the patch
+ * minimum, bit for bit the engine's (`chart_uv::evaluate`).
+ */
+function chartUvs(stream, indices, pos, n) {
+  if (stream.length < 4) throw new DecodeError('stream uvs does not decode');
+  const count = u32(stream, 0);
+  if (stream.length !== 4 + 32 * count) throw new DecodeError('stream uvs does not decode');
+  const maps = new Float32Array(count * 8);
+  const view = new DataView(stream.buffer, stream.byteOffset + 4, 32 * count);
+  for (let i = 0; i < count * 8; i++) maps[i] = view.getFloat32(4 * i, true);
+  const { chart, count: found } = charts(indices, n);
+  if (found !== count) throw new DecodeError('stream uvs does not decode');
+  const uvs = new Float32Array(n * 2);
+  for (let v = 0; v < n; v++) {
+    const c = chart[v];
+    if (c < 0) continue;
+    const [x, y, z] = [pos[v * 3], pos[v * 3 + 1], pos[v * 3 + 2]];
+    for (let k = 0; k < 2; k++) {
+      const m = c * 8 + k * 4;
+      uvs[v * 2 + k] = maps[m] * x + maps[m + 1] * y + maps[m + 2] * z + maps[m + 3];
+    }
+  }
+  return uvs;
+}
+
+/**
  * Decodes one patch blob.
  * @param {Uint8Array} blob
  * @param {{origin: number[], step: number}} grid the model grid (header)
@@ -610,7 +673,7 @@ export function decodePatch(blob, grid, deps) {
     throw new DecodeError('patch declares implausible sizes');
   }
   const sortedIds = (flags & FLAG_SORTED_IDS) !== 0;
-  if ((flags & ~KNOWN_FLAGS) !== 0 || (sortedIds && !v3)) {
+  if ((flags & ~KNOWN_FLAGS) !== 0 || (sortedIds && !v3) || (flags & FLAG_CHART_UVS && !(flags & FLAG_UVS))) {
     throw new DecodeError(`patch declares unknown flags 0x${flags.toString(16)}`);
   }
   const min = [u32(payload, 16), u32(payload, 20), u32(payload, 24)];
@@ -724,7 +787,9 @@ export function decodePatch(blob, grid, deps) {
     }
   }
   let uvs = null;
-  if (flags & FLAG_UVS) {
+  if (flags & FLAG_CHART_UVS) {
+    uvs = chartUvs(uvS, indices, pos, n);
+  } else if (flags & FLAG_UVS) {
     // u16 u, u16 v (little-endian) per vertex through the vertex codec; q / 65535 in [0, 1].
     uvs = new Float32Array(n * 2);
     if (n > 0) {
