@@ -65,7 +65,12 @@ const FLAG_SORTED_IDS: u32 = 8;
 /// Payload flag (with [`FLAG_UVS`]): the texture coordinates stream holds one affine map per
 /// atlas chart instead of coordinates per vertex ([`super::chart_uv`]).
 const FLAG_CHART_UVS: u32 = 16;
-const KNOWN_FLAGS: u32 = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS | FLAG_CHART_UVS;
+/// Payload flag (with [`FLAG_NORMALS`]): the normals stream holds one normal per original id:
+/// a border vertex whose id an earlier border vertex has (a copy where atlas charts meet) takes
+/// that vertex's decoded normal instead of reading one.
+const FLAG_NORMALS_BY_ID: u32 = 32;
+const KNOWN_FLAGS: u32 =
+    FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS | FLAG_CHART_UVS | FLAG_NORMALS_BY_ID;
 /// Blob header flag (byte 5): an image section (the colour atlas) follows the 12-byte header.
 const BLOB_IMAGE: u8 = 1;
 /// Blob header flag (byte 5): a normal-map section follows (after the image section, if any).
@@ -846,10 +851,16 @@ fn encode_split(
         })
         .unwrap_or_default();
     let mut normal_stream = Vec::new();
+    // Copies of a vertex (textured patches) have one scan normal: stored once.
+    let normals_by_id = texture.is_some() && normals.is_some();
     if let Some(n) = normals.as_ref() {
         let predicted = grid_normals(&decoded_pos, &indices);
         let mut sink = Sink::new(v3, NORMAL_CHANNELS);
+        let mut stored: HashMap<u32, ()> = HashMap::default();
         for v in (0..used).filter(|&v| border[v]) {
+            if normals_by_id && stored.insert(ids[v], ()).is_some() {
+                continue;
+            }
             let actual = oct_encode(n[v].map(|x| x as f64));
             let guess = oct_encode(predicted[v]);
             sink.put(0, actual[0] - guess[0]);
@@ -890,6 +901,9 @@ fn encode_split(
     }
     if maps.is_some() {
         flags |= FLAG_CHART_UVS;
+    }
+    if normals_by_id {
+        flags |= FLAG_NORMALS_BY_ID;
     }
 
     if normals.is_some() {
@@ -1216,6 +1230,7 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     if flags & !KNOWN_FLAGS != 0
         || (sorted && !v3)
         || (flags & FLAG_CHART_UVS != 0 && flags & FLAG_UVS == 0)
+        || (flags & FLAG_NORMALS_BY_ID != 0 && flags & FLAG_NORMALS == 0)
     {
         return Err(CodecError::Flags(flags));
     }
@@ -1372,7 +1387,16 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         let predicted = grid_normals(&pos, &indices);
         let mut normals: Vec<[f32; 3]> = predicted.iter().map(|n| n.map(|x| x as f32)).collect();
         let mut src = Source::new(v3, nor_s, NORMAL_CHANNELS);
+        let by_id = flags & FLAG_NORMALS_BY_ID != 0;
+        let mut first: HashMap<u32, usize> = HashMap::default();
         for v in (0..n).filter(|&v| border[v]) {
+            if by_id {
+                let earlier = *first.entry(original_ids[v]).or_insert(v);
+                if earlier != v {
+                    normals[v] = normals[earlier];
+                    continue;
+                }
+            }
             let guess = oct_encode(predicted[v]);
             let q = [
                 guess[0].wrapping_add(src.get(0, "normals")?),
@@ -1681,6 +1705,11 @@ mod tests {
                 .map(|w| p.grid_positions[w])
                 .collect();
             assert!(copies.iter().all(|&g| g == copies[0]), "{copies:?}");
+            // And to one normal, stored once (payload flag bit 5).
+            let first = (0..p.positions.len())
+                .find(|&w| p.original_ids[w] == id)
+                .expect("a copy");
+            assert_eq!(p.normals[v as usize], p.normals[first]);
             for k in 0..3 {
                 assert!((copies[0][k] as i64 - gp[local as usize][k] as i64).abs() <= 8);
             }

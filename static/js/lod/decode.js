@@ -31,7 +31,9 @@ const FLAG_UVS = 4;
 const FLAG_SORTED_IDS = 8;
 /** Payload flag (with `FLAG_UVS`): texture coordinates as one affine map per atlas chart. */
 const FLAG_CHART_UVS = 16;
-const KNOWN_FLAGS = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS | FLAG_CHART_UVS;
+/** Payload flag (with `FLAG_NORMALS`): one stored normal per original id (copies share it). */
+const FLAG_NORMALS_BY_ID = 32;
+const KNOWN_FLAGS = FLAG_COLORS | FLAG_NORMALS | FLAG_UVS | FLAG_SORTED_IDS | FLAG_CHART_UVS | FLAG_NORMALS_BY_ID;
 /** Blob header flag (byte 5): an image section (u32 length, then the JPEG) follows byte 12. */
 const BLOB_IMAGE = 1;
 /** Blob header flag (byte 5): a normal-map section (u32 length, then the JPEG) follows. */
@@ -673,7 +675,12 @@ export function decodePatch(blob, grid, deps) {
     throw new DecodeError('patch declares implausible sizes');
   }
   const sortedIds = (flags & FLAG_SORTED_IDS) !== 0;
-  if ((flags & ~KNOWN_FLAGS) !== 0 || (sortedIds && !v3) || (flags & FLAG_CHART_UVS && !(flags & FLAG_UVS))) {
+  if (
+    (flags & ~KNOWN_FLAGS) !== 0 ||
+    (sortedIds && !v3) ||
+    (flags & FLAG_CHART_UVS && !(flags & FLAG_UVS)) ||
+    (flags & FLAG_NORMALS_BY_ID && !(flags & FLAG_NORMALS))
+  ) {
     throw new DecodeError(`patch declares unknown flags 0x${flags.toString(16)}`);
   }
   const min = [u32(payload, 16), u32(payload, 20), u32(payload, 24)];
@@ -778,8 +785,18 @@ export function decodePatch(blob, grid, deps) {
     const cursor = { at: 0 };
     const q = [0, 0];
     const source = v3 ? residualSource(norS, NORMAL_CHANNELS, 'normals') : null;
+    // With flag bit 5, a border vertex whose id an earlier border vertex has takes its normal.
+    const first = flags & FLAG_NORMALS_BY_ID ? new Map() : null;
     for (let v = 0; v < n; v++) {
       if (!border[v]) continue;
+      if (first) {
+        const earlier = first.get(originalIds[v]);
+        if (earlier !== undefined) {
+          normals.set(normals.subarray(earlier * 3, earlier * 3 + 3), v * 3);
+          continue;
+        }
+        first.set(originalIds[v], v);
+      }
       octEncode(predicted[v * 3], predicted[v * 3 + 1], predicted[v * 3 + 2], q);
       const qx = q[0] + (v3 ? source(0) : readVarint(norS, cursor));
       const qy = q[1] + (v3 ? source(1) : readVarint(norS, cursor));
