@@ -2078,7 +2078,25 @@ mod tests {
             shift: 2,
             texture: None,
         };
-        for blob in in_both_layouts(&patch, 0) {
+        // Textured too: chart maps (the sheet's two halves) and normals once per id.
+        let corner_uvs: Vec<[f32; 2]> = indices
+            .iter()
+            .enumerate()
+            .map(|(c, &v)| {
+                let right = indices[c / 3 * 3..c / 3 * 3 + 3]
+                    .iter()
+                    .all(|&w| w % 12 >= 6);
+                let (x, y) = ((v % 12) as f32 / 24.0, (v / 12) as f32 / 12.0);
+                [if right { 0.5 + x } else { x }, y]
+            })
+            .collect();
+        let textured = PatchRef {
+            texture: Some((&corner_uvs, &[0xFF, 0xD8, 1, 2][..])),
+            ..patch
+        };
+        let mut blobs = in_both_layouts(&patch, 0).to_vec();
+        blobs.push(encode(&textured, 0));
+        for blob in blobs {
             for cut in (0..blob.len()).step_by(7) {
                 let _ = decode(&blob[..cut], &grid);
             }
@@ -2088,6 +2106,25 @@ mod tests {
                 let _ = decode(&flipped, &grid);
                 flipped[i] ^= 0x5a;
             }
+        }
+        // Flag bits 4 and 5 without the streams they qualify are refused.
+        // (Stored uncompressed: the payload is the blob's tail, its flags at byte 8.)
+        let blob = encode(&textured, 0);
+        let at = blob.len() - u32_at(&blob, 8).expect("payload length") as usize + 8;
+        let flags = u32_at(&blob, at).expect("flags");
+        assert_eq!(
+            flags & (FLAG_CHART_UVS | FLAG_NORMALS_BY_ID),
+            FLAG_CHART_UVS | FLAG_NORMALS_BY_ID
+        );
+        assert!(decode(&blob, &grid).is_ok());
+        for (clear, keep) in [
+            (FLAG_UVS, FLAG_CHART_UVS),
+            (FLAG_NORMALS, FLAG_NORMALS_BY_ID),
+        ] {
+            let mut bad = blob.clone();
+            let flags = flags & !clear | keep;
+            bad[at..at + 4].copy_from_slice(&flags.to_le_bytes());
+            assert!(matches!(decode(&bad, &grid), Err(CodecError::Flags(_))));
         }
     }
 }
