@@ -106,54 +106,36 @@ pub fn fit(
             m.push(v as u32);
         }
     }
-    // Each chart's area-weighted normal (the layout projects along its chart's mean normal).
+    let point = |v: u32| vector(exact[v as usize]);
+    // Per chart, from its triangles:
+    // - its area-weighted normal (the layout projects along its chart's mean normal);
+    // - whether any triangle has area as decoded: charts of slivers the grid flattened draw
+    //   nothing, any map will do, and none may fit their corners;
+    // - how fast each coordinate changes along its edges at most: a projection's row norm
+    //   where some edge lies along it, and what bounds the slack a fit is allowed (an
+    //   ill-posed fit's large coefficients would otherwise excuse large errors).
     let mut normals = vec![DVec3::ZERO; count];
-    let point = |v: u32| {
-        let p = exact[v as usize];
-        DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)
-    };
-    for t in indices.chunks_exact(3) {
-        if let Some(&c) = chart.get(t[0] as usize)
-            && let Some(acc) = normals.get_mut(c as usize)
-            && t.iter().all(|&v| (v as usize) < n)
-        {
-            *acc += (point(t[1]) - point(t[0])).cross(point(t[2]) - point(t[0]));
-        }
-    }
-    // Charts all of whose triangles have no area as decoded (slivers the grid flattened) draw
-    // nothing: any map will do, and none may fit their corners.
     let mut drawn = vec![false; count];
-    let at = |v: u32| {
-        let p = decoded[v as usize];
-        DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)
-    };
-    for t in indices.chunks_exact(3) {
-        if let Some(&c) = chart.get(t[0] as usize)
-            && let Some(d) = drawn.get_mut(c as usize)
-            && t.iter().all(|&v| (v as usize) < n)
-        {
-            *d |= (at(t[1]) - at(t[0])).cross(at(t[2]) - at(t[0])) != DVec3::ZERO;
-        }
-    }
-    // How fast each coordinate changes along the chart's edges at most: a projection's row
-    // norm where some edge lies along it, and what bounds the slack a fit is allowed (an
-    // ill-posed fit's large coefficients would otherwise excuse large errors).
     let mut rates = vec![[0f64; 2]; count];
     for t in indices.chunks_exact(3) {
-        if let Some(&c) = chart.get(t[0] as usize)
-            && let Some(rate) = rates.get_mut(c as usize)
-            && t.iter().all(|&v| (v as usize) < n)
-        {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                let length = (point(b) - point(a)).length();
-                if length > 0.0 {
-                    for (r, (ua, ub)) in rate
-                        .iter_mut()
-                        .zip(uvs[a as usize].iter().zip(&uvs[b as usize]))
-                    {
-                        *r = r.max((ub - ua).abs() / length);
-                    }
+        // `charts` labels every triangle whose corners are all vertices.
+        if !t.iter().all(|&v| (v as usize) < n) {
+            continue;
+        }
+        let c = chart[t[0] as usize] as usize;
+        let [p0, p1, p2] = [t[0], t[1], t[2]].map(point);
+        normals[c] += (p1 - p0).cross(p2 - p0);
+        let [d0, d1, d2] = [t[0], t[1], t[2]].map(|v| vector(decoded[v as usize]));
+        drawn[c] |= (d1 - d0).cross(d2 - d0) != DVec3::ZERO;
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let length = (point(b) - point(a)).length();
+            if length > 0.0 {
+                for (r, (ua, ub)) in rates[c]
+                    .iter_mut()
+                    .zip(uvs[a as usize].iter().zip(&uvs[b as usize]))
+                {
+                    *r = r.max((ub - ua).abs() / length);
                 }
             }
         }
@@ -168,61 +150,52 @@ pub fn fit(
             if !drawn {
                 return finish(vertices, &point, uvs, [[0.0; 3]; 2]);
             }
-            let fits = |map: &ChartMap, at: &[[i64; 3]], moved: f64| {
-                fits(map, rate, vertices, at, uvs, moved)
-            };
-            // The closer of the two fits that both stay within bounds.
+            // The closer (at the exact positions) of the two fits that both stay within bounds.
             [
                 projection(vertices, normal, &point, uvs),
                 affine(vertices, &point, uvs),
             ]
             .into_iter()
             .flatten()
-            .filter(|map| fits(map, exact, 0.0) && fits(map, decoded, quantum))
-            .min_by(|a, b| {
-                let error = |m: &ChartMap| worst(m, vertices, exact, uvs);
-                error(a).total_cmp(&error(b))
+            .filter_map(|map| {
+                let within = |error: [f64; 2], moved: f64| {
+                    let slack = slack(&map, rate, moved);
+                    error[0] <= slack[0] && error[1] <= slack[1]
+                };
+                let error = errors(&map, vertices, exact, uvs);
+                (within(error, 0.0) && within(errors(&map, vertices, decoded, uvs), quantum))
+                    .then_some((map, error[0].max(error[1])))
             })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(map, _)| map)
         })
         .collect()
 }
 
-/// Whether `map` gives each vertex its coordinates within the grid's rounding (√3/2 units)
-/// plus `moved` units of quantisation, half again for the fit, and a u16 step: distances
-/// taken to coordinates by the map's row norms, at most twice the chart's edge `rate`.
-fn fits(
-    map: &ChartMap,
-    rate: [f64; 2],
-    vertices: &[u32],
-    at: &[[i64; 3]],
-    uvs: &[[f64; 2]],
-    moved: f64,
-) -> bool {
+/// A grid position as a vector.
+fn vector(p: [i64; 3]) -> DVec3 {
+    DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)
+}
+
+/// How far `map` may miss each coordinate: the grid's rounding (√3/2 units) plus `moved` units
+/// of quantisation, half again for the fit, taken to coordinates by the map's row norms (at
+/// most twice the chart's edge `rate`), and a u16 step.
+fn slack(map: &ChartMap, rate: [f64; 2], moved: f64) -> [f64; 2] {
     let reach = (0.5 * 3f64.sqrt() * (1.0 + moved)) * 1.5;
-    let slack = |m: &[f32], rate: f64| {
+    std::array::from_fn(|k| {
+        let m = &map[4 * k..4 * k + 3];
         let a = DVec3::new(m[0] as f64, m[1] as f64, m[2] as f64).length();
-        a.min(2.0 * rate) * reach + 2.0 / 65535.0
-    };
-    let (su, sv) = (slack(&map[..4], rate[0]), slack(&map[4..], rate[1]));
-    vertices.iter().all(|&v| {
-        let got = evaluate(map, at[v as usize]);
-        let want = uvs[v as usize];
-        (got[0] as f64 - want[0]).abs() <= su && (got[1] as f64 - want[1]).abs() <= sv
+        a.min(2.0 * rate[k]) * reach + 2.0 / 65535.0
     })
 }
 
-/// The largest difference between `map` and the coordinates over the vertices.
-fn worst(map: &ChartMap, vertices: &[u32], at: &[[i64; 3]], uvs: &[[f64; 2]]) -> f64 {
-    vertices
-        .iter()
-        .map(|&v| {
-            let got = evaluate(map, at[v as usize]);
-            let want = uvs[v as usize];
-            (got[0] as f64 - want[0])
-                .abs()
-                .max((got[1] as f64 - want[1]).abs())
-        })
-        .fold(0.0, f64::max)
+/// The largest difference between `map` and each coordinate over the vertices at `at`.
+fn errors(map: &ChartMap, vertices: &[u32], at: &[[i64; 3]], uvs: &[[f64; 2]]) -> [f64; 2] {
+    vertices.iter().fold([0.0; 2], |worst, &v| {
+        let got = evaluate(map, at[v as usize]);
+        let want = uvs[v as usize];
+        std::array::from_fn(|k| worst[k].max((got[k] as f64 - want[k]).abs()))
+    })
 }
 
 /// The chart's least-squares map constrained to project along `normal` (`A · normal = 0`):

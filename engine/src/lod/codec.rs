@@ -39,7 +39,7 @@
 use meshopt::{
     decode_index_buffer, decode_vertex_buffer, encode_index_buffer, encode_vertex_buffer,
 };
-use rustc_hash::FxHashMap as HashMap;
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 
 use super::chart_uv;
 use super::frontcoder::{self, Prediction};
@@ -856,9 +856,9 @@ fn encode_split(
     if let Some(n) = normals.as_ref() {
         let predicted = grid_normals(&decoded_pos, &indices);
         let mut sink = Sink::new(v3, NORMAL_CHANNELS);
-        let mut stored: HashMap<u32, ()> = HashMap::default();
+        let mut stored: HashSet<u32> = HashSet::default();
         for v in (0..used).filter(|&v| border[v]) {
-            if normals_by_id && stored.insert(ids[v], ()).is_some() {
+            if normals_by_id && !stored.insert(ids[v]) {
                 continue;
             }
             let actual = oct_encode(n[v].map(|x| x as f64));
