@@ -75,6 +75,9 @@ pub struct PatchTexture {
     pub uvs: Vec<[f32; 2]>,
     /// World units per texel.
     pub texel_size: f32,
+    /// The texels [`bake`] sampled from the surface (inside a triangle, or a triangle's
+    /// centroid texel), row by row; empty where not known (an atlas read back from scratch).
+    pub covered: Vec<bool>,
 }
 
 impl PatchTexture {
@@ -498,8 +501,19 @@ pub fn bake(
     maps: Maps,
 ) -> PatchTexture {
     let (w, h) = (layout.width as usize, layout.height as usize);
-    let mut texels = vec![[0f32; 7]; w * h];
+    // One plane a map: the colour plane alone (four floats a texel, not seven) is what every
+    // whole-atlas pass below reads and writes unless normals are baked.
+    let mut colour = vec![[0f32; 4]; if maps.color { w * h } else { 0 }];
+    let mut normal = vec![[0f32; 3]; if maps.normals { w * h } else { 0 }];
     let mut filled = vec![false; w * h];
+    let mut put = |i: usize, s: Sample| {
+        if let Some(c) = colour.get_mut(i) {
+            *c = [s[0], s[1], s[2], s[3]];
+        }
+        if let Some(n) = normal.get_mut(i) {
+            *n = [s[4], s[5], s[6]];
+        }
+    };
     let offsets: &[Vec2; 4] = &[
         Vec2::new(-0.25, -0.25),
         Vec2::new(0.25, -0.25),
@@ -536,7 +550,7 @@ pub fn bake(
                 let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 let b = bary(p);
                 if b.iter().all(|&v| v >= -1e-5) {
-                    texels[y * w + x] = value(p);
+                    put(y * w + x, value(p));
                     filled[y * w + x] = true;
                 }
             }
@@ -548,84 +562,137 @@ pub fn bake(
             (centroid.y.max(0.0) as usize).min(h - 1),
         );
         if !filled[y * w + x] {
-            texels[y * w + x] = value(centroid);
+            put(y * w + x, value(centroid));
             filled[y * w + x] = true;
         }
     }
-    dilate(&mut texels, &mut filled, w, h, GUTTER as usize);
-    let image = |texel: fn(&Sample) -> [u8; 4]| {
-        Texture::from_texels(
-            layout.width,
-            layout.height,
-            texels.iter().map(texel).collect(),
-        )
-        .unwrap_or_else(|| {
+    let image = |texels: Vec<[u8; 4]>| {
+        Texture::from_texels(layout.width, layout.height, texels).unwrap_or_else(|| {
             Texture::from_texels(1, 1, vec![[255; 4]]).expect("a 1x1 image is valid")
         })
     };
+    let gutters = dilation(&filled, w, h, GUTTER as usize);
     let (fw, fh) = (layout.width as f32, layout.height as f32);
     PatchTexture {
-        image: maps
-            .color
-            .then(|| image(|t| encode_rgba([t[0], t[1], t[2], t[3]]))),
-        normals: maps
-            .normals
-            .then(|| image(|t| encode_normal([t[4], t[5], t[6]]))),
+        image: maps.color.then(|| {
+            fill(&mut colour, &filled, &gutters, w, h);
+            image(colour.iter().map(|&t| encode_rgba(t)).collect())
+        }),
+        normals: maps.normals.then(|| {
+            fill(&mut normal, &filled, &gutters, w, h);
+            image(normal.iter().map(|&t| encode_normal(t)).collect())
+        }),
         uvs: layout
             .corners
             .iter()
             .map(|c| [c.x / fw, c.y / fh])
             .collect(),
         texel_size: layout.texel_size,
+        covered: filled,
     }
 }
 
-/// `passes` rounds of filling empty texels with the mean of their filled 8-neighbours, then
-/// [`push_pull`] everywhere still empty.
-fn dilate<const N: usize>(
+/// The texels each of `passes` dilation rounds fills, in order: round `k` takes the empty
+/// texels with a filled 8-neighbour after rounds `0..k` (found on bit rows, 64 texels a word,
+/// so the empty space of an atlas costs a few word operations a row).
+fn dilation(filled: &[bool], w: usize, h: usize, passes: usize) -> Vec<Vec<usize>> {
+    let words = w.div_ceil(64);
+    // Bit `x % 64` of word `x / 64` of row `y` is texel `(x, y)`.
+    let mut bits = vec![0u64; words * h];
+    for y in 0..h {
+        for x in 0..w {
+            if filled[y * w + x] {
+                bits[y * words + x / 64] |= 1 << (x % 64);
+            }
+        }
+    }
+    let mut rounds = Vec::with_capacity(passes);
+    for _ in 0..passes {
+        // A row's filled texels spread one texel left and right.
+        let spread = |y: usize| -> Vec<u64> {
+            let row = &bits[y * words..(y + 1) * words];
+            (0..words)
+                .map(|k| {
+                    let left = (row[k] << 1) | if k > 0 { row[k - 1] >> 63 } else { 0 };
+                    let right = (row[k] >> 1) | row.get(k + 1).map_or(0, |&n| n << 63);
+                    row[k] | left | right
+                })
+                .collect()
+        };
+        let spreads: Vec<Vec<u64>> = (0..h).map(spread).collect();
+        let mut round = Vec::new();
+        for y in 0..h {
+            for k in 0..words {
+                let mut near = spreads[y][k];
+                if y > 0 {
+                    near |= spreads[y - 1][k];
+                }
+                if y + 1 < h {
+                    near |= spreads[y + 1][k];
+                }
+                let mut new = near & !bits[y * words + k];
+                if k + 1 == words && !w.is_multiple_of(64) {
+                    new &= (1u64 << (w % 64)) - 1;
+                }
+                while new != 0 {
+                    let b = new.trailing_zeros() as usize;
+                    round.push(y * w + k * 64 + b);
+                    new &= new - 1;
+                }
+            }
+        }
+        if round.is_empty() {
+            break;
+        }
+        for &i in &round {
+            bits[(i / w) * words + (i % w) / 64] |= 1 << (i % w % 64);
+        }
+        rounds.push(round);
+    }
+    rounds
+}
+
+/// Fills a plane's empty texels: the dilation rounds of [`dilation`] (each texel the mean of
+/// its 8-neighbours filled before its round), then [`push_pull`] everywhere still empty.
+fn fill<const N: usize>(
     texels: &mut [[f32; N]],
-    filled: &mut [bool],
+    filled: &[bool],
+    rounds: &[Vec<usize>],
     w: usize,
     h: usize,
-    passes: usize,
 ) {
-    for _ in 0..passes {
-        let before = filled.to_vec();
-        let mut changed = false;
-        for y in 0..h {
-            for x in 0..w {
-                if before[y * w + x] {
-                    continue;
-                }
+    let mut done = filled.to_vec();
+    for round in rounds {
+        let means: Vec<[f32; N]> = round
+            .iter()
+            .map(|&i| {
+                let (x, y) = ((i % w) as i64, (i / w) as i64);
                 let mut acc = [0f32; N];
                 let mut n = 0;
                 for dy in -1i64..=1 {
                     for dx in -1i64..=1 {
-                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        let (nx, ny) = (x + dx, y + dy);
                         if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
                             continue;
                         }
-                        let i = ny as usize * w + nx as usize;
-                        if before[i] {
+                        let j = ny as usize * w + nx as usize;
+                        if done[j] {
                             for k in 0..N {
-                                acc[k] += texels[i][k];
+                                acc[k] += texels[j][k];
                             }
                             n += 1;
                         }
                     }
                 }
-                if n > 0 {
-                    texels[y * w + x] = acc.map(|a| a / n as f32);
-                    filled[y * w + x] = true;
-                    changed = true;
-                }
-            }
-        }
-        if !changed {
-            break;
+                acc.map(|a| a / n.max(1) as f32)
+            })
+            .collect();
+        for (&i, m) in round.iter().zip(means) {
+            texels[i] = m;
+            done[i] = true;
         }
     }
-    push_pull(texels, filled, w, h);
+    push_pull(texels, &done, w, h);
 }
 
 /// Fills the texels no chart and no gutter reaches by push-pull (Gortler et al., *The
@@ -642,38 +709,35 @@ fn push_pull<const N: usize>(texels: &mut [[f32; N]], filled: &[bool], w: usize,
         texels.fill([1.0; N]);
         return;
     }
-    // Push: per level, colour premultiplied by a weight capped at 1.
+    // Push: per level above the atlas, colour premultiplied by a weight capped at 1. The
+    // atlas itself is level 0 as it is (its empty texels are zero, weight 0), not a copy.
     struct Level<const N: usize> {
         w: usize,
         h: usize,
         colour: Vec<[f32; N]>,
         weight: Vec<f32>,
     }
-    let mut levels = vec![Level::<N> {
-        w,
-        h,
-        colour: texels
-            .iter()
-            .zip(filled)
-            .map(|(t, &f)| if f { *t } else { [0.0; N] })
-            .collect(),
-        weight: filled.iter().map(|&f| f32::from(u8::from(f))).collect(),
-    }];
+    let mut levels: Vec<Level<N>> = Vec::new();
     loop {
-        let below = &levels[levels.len() - 1];
-        if below.w == 1 && below.h == 1 {
+        let (bw, bh) = levels.last().map_or((w, h), |l| (l.w, l.h));
+        if bw == 1 && bh == 1 {
             break;
         }
-        let (nw, nh) = (below.w.div_ceil(2), below.h.div_ceil(2));
+        let (nw, nh) = (bw.div_ceil(2), bh.div_ceil(2));
         let mut colour = vec![[0f32; N]; nw * nh];
         let mut weight = vec![0f32; nw * nh];
-        for y in 0..below.h {
-            for x in 0..below.w {
-                let (i, j) = (y * below.w + x, (y / 2) * nw + x / 2);
-                for (c, b) in colour[j].iter_mut().zip(below.colour[i]) {
+        for y in 0..bh {
+            for x in 0..bw {
+                let (i, j) = (y * bw + x, (y / 2) * nw + x / 2);
+                let (b, bwt) = match levels.last() {
+                    Some(below) => (below.colour[i], below.weight[i]),
+                    None if filled[i] => (texels[i], 1.0),
+                    None => ([0.0; N], 0.0),
+                };
+                for (c, b) in colour[j].iter_mut().zip(b) {
                     *c += b;
                 }
-                weight[j] += below.weight[i];
+                weight[j] += bwt;
             }
         }
         for (c, wt) in colour.iter_mut().zip(weight.iter_mut()) {
@@ -693,7 +757,7 @@ fn push_pull<const N: usize>(texels: &mut [[f32; N]], filled: &[bool], w: usize,
     }
     // Pull: from the top (one texel, filled: some texel was), every level's missing weight
     // is made up by the level above, now complete.
-    for l in (0..levels.len() - 1).rev() {
+    for l in (0..levels.len().saturating_sub(1)).rev() {
         let (lower, upper) = levels.split_at_mut(l + 1);
         let (level, above) = (&mut lower[l], &upper[0]);
         for y in 0..level.h {
@@ -713,9 +777,14 @@ fn push_pull<const N: usize>(texels: &mut [[f32; N]], filled: &[bool], w: usize,
             }
         }
     }
-    for ((t, &f), c) in texels.iter_mut().zip(filled).zip(&levels[0].colour) {
-        if !f {
-            *t = *c;
+    // Level 0: every empty texel (weight 0) takes the texel above whole.
+    let above = &levels[0];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if !filled[i] {
+                texels[i] = above.colour[(y / 2) * above.w + x / 2];
+            }
         }
     }
 }
@@ -1008,6 +1077,85 @@ fn jpeg(image: &Texture, quality: u8, sampling: jpeg_encoder::SamplingFactor) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dilation_rounds_match_a_texel_by_texel_scan() {
+        // The rounds found on bit rows against the plain definition (every empty texel with
+        // a filled 8-neighbour, from the texels filled before the round), on widths either
+        // side of a word and masks from sparse to dense.
+        let mut s = 0x9e37_79b9_u32;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            s
+        };
+        for (w, h) in [
+            (1, 1),
+            (5, 3),
+            (63, 9),
+            (64, 4),
+            (65, 7),
+            (130, 11),
+            (200, 2),
+        ] {
+            for density in [0u32, 2, 10, 40, 90, 100] {
+                let filled: Vec<bool> = (0..w * h).map(|_| next() % 100 < density).collect();
+                let rounds = dilation(&filled, w, h, GUTTER as usize);
+                let mut done = filled.clone();
+                let mut expected = Vec::new();
+                for _ in 0..GUTTER {
+                    let round: Vec<usize> = (0..w * h)
+                        .filter(|&i| {
+                            let (x, y) = ((i % w) as i64, (i / w) as i64);
+                            !done[i]
+                                && (-1..=1).any(|dy| {
+                                    (-1..=1).any(|dx| {
+                                        let (nx, ny) = (x + dx, y + dy);
+                                        nx >= 0
+                                            && ny >= 0
+                                            && nx < w as i64
+                                            && ny < h as i64
+                                            && done[ny as usize * w + nx as usize]
+                                    })
+                                })
+                        })
+                        .collect();
+                    if round.is_empty() {
+                        break;
+                    }
+                    for &i in &round {
+                        done[i] = true;
+                    }
+                    expected.push(round);
+                }
+                assert_eq!(rounds, expected, "{w}x{h}, {density}% filled");
+                // Filling takes each round's texels from the texels before it: every
+                // filled texel keeps its value, and a texel of the first round is the mean of
+                // its filled neighbours.
+                let mut texels: Vec<[f32; 1]> = (0..w * h)
+                    .map(|i| [if filled[i] { (i % 7) as f32 } else { 0.0 }])
+                    .collect();
+                let before = texels.clone();
+                fill(&mut texels, &filled, &rounds, w, h);
+                for i in (0..w * h).filter(|&i| filled[i]) {
+                    assert_eq!(texels[i], before[i]);
+                }
+                if let Some(&i) = rounds.first().and_then(|r| r.first()) {
+                    let (x, y) = (i % w, i / w);
+                    let near: Vec<f32> = (y.saturating_sub(1)..(y + 2).min(h))
+                        .flat_map(|ny| {
+                            (x.saturating_sub(1)..(x + 2).min(w)).map(move |nx| ny * w + nx)
+                        })
+                        .filter(|&j| filled[j])
+                        .map(|j| before[j][0])
+                        .collect();
+                    let mean = near.iter().sum::<f32>() / near.len() as f32;
+                    assert!((texels[i][0] - mean).abs() < 1e-5, "{w}x{h}: {i}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn push_pull_continues_the_filled_texels_in_flat_blocks() {

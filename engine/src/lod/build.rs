@@ -610,7 +610,13 @@ impl<'a> Builder<'a> {
                 let bytes = atlas_to_bytes(t);
                 let offset = self.atlases.append(&bytes)?;
                 let features = t.image.as_ref().map_or_else(Features::default, |image| {
-                    fragment_quality::features(&patch.positions, &patch.indices, image, &t.uvs)
+                    fragment_quality::features(
+                        &patch.positions,
+                        &patch.indices,
+                        image,
+                        &t.uvs,
+                        Some(&t.covered),
+                    )
                 });
                 (offset, bytes.len() as u32, features)
             }
@@ -1096,6 +1102,7 @@ impl<'a> Builder<'a> {
                             let mut m = measure_atlas(
                                 image,
                                 &atlas.uvs,
+                                &atlas.covered,
                                 jpeg,
                                 n.features.covered_texels,
                                 this.options.measure_textures,
@@ -1262,6 +1269,7 @@ impl<'a> Builder<'a> {
 fn measure_atlas(
     image: &mesh::Texture,
     uvs: &[[f32; 2]],
+    covered: &[bool],
     jpeg: &[u8],
     covered_texels: u64,
     measure: bool,
@@ -1275,7 +1283,15 @@ fn measure_atlas(
     };
     if measure {
         let (w, h) = (image.width() as usize, image.height() as usize);
-        let covered = fragment_quality::coverage(w, h, uvs);
+        // The texels the bake sampled (as the features counted them), else those inside the
+        // triangles.
+        let found;
+        let covered = if covered.len() == w * h {
+            covered
+        } else {
+            found = fragment_quality::coverage(w, h, uvs);
+            &found[..]
+        };
         let back = mesh::Texture::decode(jpeg).map_err(io::Error::other)?;
         let ssim = fragment_quality::ssim_map(image, &back)
             .ok_or_else(|| io::Error::other("the JPEG decodes to another size"))?;
@@ -1447,12 +1463,23 @@ fn atlas_to_bytes(t: &PatchTexture) -> Vec<u8> {
     out.extend_from_slice(&h.to_le_bytes());
     out.extend_from_slice(&t.texel_size.to_le_bytes());
     out.extend_from_slice(&(t.uvs.len() as u32).to_le_bytes());
-    let which = u32::from(t.image.is_some()) | (u32::from(t.normals.is_some()) << 1);
+    let covered = t.covered.len() == w as usize * h as usize && w * h > 0;
+    let which = u32::from(t.image.is_some())
+        | (u32::from(t.normals.is_some()) << 1)
+        | (u32::from(covered) << 2);
     out.extend_from_slice(&which.to_le_bytes());
     for image in images.into_iter().flatten() {
         out.extend_from_slice(bytemuck::cast_slice(image.texels()));
     }
     out.extend_from_slice(bytemuck::cast_slice(&t.uvs));
+    if covered {
+        // The texels the bake sampled, a bit each: what the fragment's measures count over.
+        out.extend(
+            t.covered
+                .chunks(8)
+                .map(|c| c.iter().rev().fold(0u8, |b, &f| (b << 1) | u8::from(f))),
+        );
+    }
     out
 }
 
@@ -1481,11 +1508,22 @@ fn atlas_from_bytes(bytes: &[u8]) -> io::Result<PatchTexture> {
     let color = image(which & 1 != 0)?;
     let normals = image(which & 2 != 0)?;
     let uvs = bytes.get(at..at + n * 8).ok_or_else(bad)?;
+    at += n * 8;
+    let texels = w as usize * h as usize;
+    let covered = if which & 4 != 0 {
+        let bits = bytes.get(at..at + texels.div_ceil(8)).ok_or_else(bad)?;
+        (0..texels)
+            .map(|i| bits[i / 8] >> (i % 8) & 1 != 0)
+            .collect()
+    } else {
+        Vec::new()
+    };
     Ok(PatchTexture {
         image: color,
         normals,
         uvs: bytemuck::pod_collect_to_vec(uvs),
         texel_size,
+        covered,
     })
 }
 

@@ -27,6 +27,7 @@
 //!   stays `Q_i` while featured fragments get more and plain ones less. `ΔQ = 0` is uniform
 //!   quality. `meshwiki-bench textures` compares the two at equal bytes.
 
+use super::patch::{edge_ends, edge_runs};
 use crate::mesh::Texture;
 use glam::Vec3;
 
@@ -48,14 +49,26 @@ pub struct Features {
     pub covered_texels: u64,
 }
 
-/// Both densities of a patch and its atlas, and the atlas' covered texels.
+/// Both densities of a patch and its atlas, and the atlas' covered texels: `covered` where
+/// the bake that made the atlas knows them (its texels sampled from the surface, row by row,
+/// [`super::atlas::PatchTexture::covered`]), else found from `uvs` ([`coverage`]).
 pub fn features(
     positions: &[[f32; 3]],
     indices: &[u32],
     image: &Texture,
     uvs: &[[f32; 2]],
+    covered: Option<&[bool]>,
 ) -> Features {
-    let (texture, covered_texels) = texture_density(image, uvs);
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let found;
+    let covered = match covered.filter(|c| c.len() == w * h) {
+        Some(c) => c,
+        None => {
+            found = coverage(w, h, uvs);
+            &found[..]
+        }
+    };
+    let (texture, covered_texels) = texture_density(image, covered);
     Features {
         surface: surface_features(positions, indices),
         texture,
@@ -69,45 +82,53 @@ pub fn surface_features(positions: &[[f32; 3]], indices: &[u32]) -> f32 {
     if n == 0 || indices.len() < 3 {
         return 0.0;
     }
+    if indices.iter().any(|&i| i as usize >= n) {
+        return 0.0;
+    }
     let p = |i: u32| Vec3::from(positions[i as usize]);
-    // Undirected edges with their use counts: one use marks the border.
-    let mut edges: Vec<(u32, u32)> = Vec::with_capacity(indices.len());
     let mut normals = vec![Vec3::ZERO; n];
     for t in indices.chunks_exact(3) {
         let face = (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0]));
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            edges.push((a.min(b), a.max(b)));
-            if let Some(v) = normals.get_mut(t[k] as usize) {
-                *v += face;
-            }
+        for &v in t {
+            normals[v as usize] += face;
         }
     }
-    edges.sort_unstable();
+    // Undirected edges with their use counts (one use marks the border), in key order; each
+    // vertex's one-ring in that order, packed (`ring[start[v]..start[v + 1]]`).
+    let edges: Vec<(u64, u32)> = edge_runs(indices, n, false)
+        .into_iter()
+        .filter(|&(key, _)| {
+            let (a, b) = edge_ends(key);
+            a != b
+        })
+        .collect();
+    let mut start = vec![0u32; n + 1];
+    for &(key, _) in &edges {
+        let (a, b) = edge_ends(key);
+        start[a as usize + 1] += 1;
+        start[b as usize + 1] += 1;
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut ring = vec![0u32; start[n] as usize];
+    let mut fill = start.clone();
     let mut border = vec![false; n];
-    let mut adjacency: Vec<Vec<u32>> = vec![Vec::new(); n];
     let mut edge_length = 0.0f64;
-    let mut unique = 0usize;
-    let mut i = 0;
-    while i < edges.len() {
-        let e = edges[i];
-        let mut j = i + 1;
-        while j < edges.len() && edges[j] == e {
-            j += 1;
+    for &(key, uses) in &edges {
+        let (a, b) = edge_ends(key);
+        if uses == 1 {
+            border[a as usize] = true;
+            border[b as usize] = true;
         }
-        let (a, b) = (e.0 as usize, e.1 as usize);
-        if a < n && b < n && a != b {
-            if j - i == 1 {
-                border[a] = true;
-                border[b] = true;
-            }
-            adjacency[a].push(e.1);
-            adjacency[b].push(e.0);
-            edge_length += f64::from(p(e.0).distance(p(e.1)));
-            unique += 1;
-        }
-        i = j;
+        ring[fill[a as usize] as usize] = b;
+        fill[a as usize] += 1;
+        ring[fill[b as usize] as usize] = a;
+        fill[b as usize] += 1;
+        edge_length += f64::from(p(a).distance(p(b)));
     }
+    let unique = edges.len();
+    let adjacency = |v: usize| &ring[start[v] as usize..start[v + 1] as usize];
     let h = (edge_length / unique.max(1) as f64) as f32;
     if h <= 0.0 || !h.is_finite() {
         return 0.0;
@@ -115,7 +136,7 @@ pub fn surface_features(positions: &[[f32; 3]], indices: &[u32]) -> f32 {
     // LoG at the patch's own scale: the umbrella offset along the normal, in mean edges...
     let umbrella: Vec<f32> = (0..n)
         .map(|v| {
-            let ring = &adjacency[v];
+            let ring = adjacency(v);
             if ring.is_empty() {
                 return 0.0;
             }
@@ -126,7 +147,7 @@ pub fn surface_features(positions: &[[f32; 3]], indices: &[u32]) -> f32 {
     // ... then Gaussian-smoothed over the one-ring.
     let response: Vec<f32> = (0..n)
         .map(|v| {
-            let ring = &adjacency[v];
+            let ring = adjacency(v);
             (umbrella[v] + ring.iter().map(|&u| umbrella[u as usize]).sum::<f32>())
                 / (1 + ring.len()) as f32
         })
@@ -134,13 +155,13 @@ pub fn surface_features(positions: &[[f32; 3]], indices: &[u32]) -> f32 {
     let mut interior = 0usize;
     let mut crossings = 0usize;
     for v in 0..n {
-        if border[v] || adjacency[v].is_empty() {
+        if border[v] || adjacency(v).is_empty() {
             continue;
         }
         interior += 1;
         let r = response[v];
         // One feature point per crossing: the vertex on its stronger side.
-        if adjacency[v].iter().any(|&u| {
+        if adjacency(v).iter().any(|&u| {
             let q = response[u as usize];
             r * q < 0.0 && (r - q).abs() > SURFACE_CONTRAST && r.abs() >= q.abs()
         }) {
@@ -152,16 +173,16 @@ pub fn surface_features(positions: &[[f32; 3]], indices: &[u32]) -> f32 {
 
 /// Texture zero crossings per covered texel (module docs).
 pub fn texture_features(image: &Texture, uvs: &[[f32; 2]]) -> f32 {
-    texture_density(image, uvs).0
+    let covered = coverage(image.width() as usize, image.height() as usize, uvs);
+    texture_density(image, &covered).0
 }
 
-/// [`texture_features`] and the covered texels it was counted over.
-fn texture_density(image: &Texture, uvs: &[[f32; 2]]) -> (f32, u64) {
+/// [`texture_features`] over the texels `covered`, and their number.
+fn texture_density(image: &Texture, covered: &[bool]) -> (f32, u64) {
     let (w, h) = (image.width() as usize, image.height() as usize);
-    if w == 0 || h == 0 {
+    if w == 0 || h == 0 || covered.len() != w * h {
         return (0.0, 0);
     }
-    let covered = coverage(w, h, uvs);
     let luma = luminance(image.texels());
     let fine = blur(&luma, w, h, 1.0);
     let coarse = blur(&luma, w, h, 1.6);

@@ -53,9 +53,14 @@ impl Nearest {
             .collect();
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let centroids: Vec<Vec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
+        // Each triangle's box once, not its three corners again at every level of the build.
+        let boxes: Vec<(Vec3, Vec3)> = tris
+            .iter()
+            .map(|t| (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
+            .collect();
         let mut nodes = Vec::with_capacity(2 * tris.len() / LEAF + 1);
         if !tris.is_empty() {
-            build(&tris, &centroids, &mut order, 0, &mut nodes);
+            build(&boxes, &centroids, &mut order, 0, &mut nodes);
         }
         Nearest {
             tris,
@@ -139,7 +144,7 @@ impl Nearest {
 }
 
 fn build(
-    tris: &[[Vec3; 3]],
+    boxes: &[(Vec3, Vec3)],
     centroids: &[Vec3],
     order: &mut [u32],
     first: u32,
@@ -147,10 +152,9 @@ fn build(
 ) -> u32 {
     let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
     for &t in order.iter() {
-        for v in tris[t as usize] {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
+        let (l, h) = boxes[t as usize];
+        lo = lo.min(l);
+        hi = hi.max(h);
     }
     let id = nodes.len() as u32;
     nodes.push(Node {
@@ -176,8 +180,8 @@ fn build(
         centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
     });
     let (left, right) = order.split_at_mut(mid);
-    let l = build(tris, centroids, left, first, nodes);
-    let r = build(tris, centroids, right, first + mid as u32, nodes);
+    let l = build(boxes, centroids, left, first, nodes);
+    let r = build(boxes, centroids, right, first + mid as u32, nodes);
     nodes[id as usize].first = l;
     nodes[id as usize].count = 0;
     nodes[id as usize].right = r;
