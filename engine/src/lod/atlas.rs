@@ -596,6 +596,9 @@ pub fn bake(
 /// texels with a filled 8-neighbour after rounds `0..k` (found on bit rows, 64 texels a word,
 /// so the empty space of an atlas costs a few word operations a row).
 fn dilation(filled: &[bool], w: usize, h: usize, passes: usize) -> Vec<Vec<usize>> {
+    if w == 0 || h == 0 {
+        return Vec::new();
+    }
     let words = w.div_ceil(64);
     // Bit `x % 64` of word `x / 64` of row `y` is texel `(x, y)`.
     let mut bits = vec![0u64; words * h];
@@ -608,27 +611,27 @@ fn dilation(filled: &[bool], w: usize, h: usize, passes: usize) -> Vec<Vec<usize
     }
     let mut rounds = Vec::with_capacity(passes);
     for _ in 0..passes {
-        // A row's filled texels spread one texel left and right.
-        let spread = |y: usize| -> Vec<u64> {
-            let row = &bits[y * words..(y + 1) * words];
-            (0..words)
-                .map(|k| {
+        // Each row's filled texels spread one texel left and right (a word's end bits carry
+        // into its neighbours in the row).
+        let spreads: Vec<u64> = bits
+            .chunks_exact(words)
+            .flat_map(|row| {
+                (0..words).map(move |k| {
                     let left = (row[k] << 1) | if k > 0 { row[k - 1] >> 63 } else { 0 };
                     let right = (row[k] >> 1) | row.get(k + 1).map_or(0, |&n| n << 63);
                     row[k] | left | right
                 })
-                .collect()
-        };
-        let spreads: Vec<Vec<u64>> = (0..h).map(spread).collect();
+            })
+            .collect();
         let mut round = Vec::new();
         for y in 0..h {
             for k in 0..words {
-                let mut near = spreads[y][k];
+                let mut near = spreads[y * words + k];
                 if y > 0 {
-                    near |= spreads[y - 1][k];
+                    near |= spreads[(y - 1) * words + k];
                 }
                 if y + 1 < h {
-                    near |= spreads[y + 1][k];
+                    near |= spreads[(y + 1) * words + k];
                 }
                 let mut new = near & !bits[y * words + k];
                 if k + 1 == words && !w.is_multiple_of(64) {

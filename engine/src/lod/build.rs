@@ -658,13 +658,18 @@ impl<'a> Builder<'a> {
         })
     }
 
-    /// A stored patch's atlas.
-    fn load_atlas(&self, node: u32) -> io::Result<Option<PatchTexture>> {
+    /// A stored patch's atlas; with `covered`, the texels its bake sampled too (only the
+    /// JPEG measures read them: resampling a coarser patch does not).
+    fn load_atlas(&self, node: u32, covered: bool) -> io::Result<Option<PatchTexture>> {
         let n = &self.nodes[node as usize];
         if n.tex_len == 0 {
             return Ok(None);
         }
-        atlas_from_bytes(&self.atlases.read(n.tex_offset, n.tex_len as usize)?).map(Some)
+        atlas_from_bytes(
+            &self.atlases.read(n.tex_offset, n.tex_len as usize)?,
+            covered,
+        )
+        .map(Some)
     }
 
     /// Original IDs of a stored patch (the head of its scratch record), without the rest.
@@ -903,7 +908,7 @@ impl<'a> Builder<'a> {
                     let member_atlases = if maps.color || maps.normals {
                         members
                             .iter()
-                            .map(|&m| this.load_atlas(pool_ref[m].node))
+                            .map(|&m| this.load_atlas(pool_ref[m].node, false))
                             .collect::<io::Result<Vec<_>>>()?
                     } else {
                         members.iter().map(|_| None).collect()
@@ -1078,7 +1083,8 @@ impl<'a> Builder<'a> {
                 .map(|&i| {
                     let n = &this.nodes[i];
                     let blob = this.blobs.read(n.blob_offset, n.blob_len as usize)?;
-                    let Some(atlas) = this.load_atlas(i as u32)? else {
+                    let Some(atlas) = this.load_atlas(i as u32, this.options.measure_textures)?
+                    else {
                         return Ok((blob, None, None));
                     };
                     let color = match (quality[i], &atlas.image) {
@@ -1483,7 +1489,7 @@ fn atlas_to_bytes(t: &PatchTexture) -> Vec<u8> {
     out
 }
 
-fn atlas_from_bytes(bytes: &[u8]) -> io::Result<PatchTexture> {
+fn atlas_from_bytes(bytes: &[u8], with_covered: bool) -> io::Result<PatchTexture> {
     let bad = || io::Error::new(io::ErrorKind::InvalidData, "corrupt scratch atlas");
     let word = |i: usize| -> io::Result<u32> {
         let b = bytes.get(i * 4..i * 4 + 4).ok_or_else(bad)?;
@@ -1510,7 +1516,7 @@ fn atlas_from_bytes(bytes: &[u8]) -> io::Result<PatchTexture> {
     let uvs = bytes.get(at..at + n * 8).ok_or_else(bad)?;
     at += n * 8;
     let texels = w as usize * h as usize;
-    let covered = if which & 4 != 0 {
+    let covered = if with_covered && which & 4 != 0 {
         let bits = bytes.get(at..at + texels.div_ceil(8)).ok_or_else(bad)?;
         (0..texels)
             .map(|i| bits[i / 8] >> (i % 8) & 1 != 0)
