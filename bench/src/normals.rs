@@ -132,7 +132,7 @@ fn psnr(a: &[[u8; 4]], b: &[[u8; 4]]) -> f64 {
 }
 
 /// `image` (`w`×`h`, twice the target) scaled down 2:1 in linear light.
-fn half(image: &[[u8; 4]], w: usize, h: usize) -> Vec<[u8; 4]> {
+pub(crate) fn half(image: &[[u8; 4]], w: usize, h: usize) -> Vec<[u8; 4]> {
     let (hw, hh) = (w / 2, h / 2);
     (0..hw * hh)
         .map(|i| {

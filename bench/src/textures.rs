@@ -15,7 +15,9 @@
 //! the bench first builds it without and with the texture, side by side: time, peak memory
 //! and the atlases' bytes per texel against the source texture as one JPEG of the same
 //! quality (issue 11: throughput and memory within 2× of the untextured build, output per
-//! texel no larger than the source JPEG's).
+//! texel no larger than the source JPEG's), and, like for like, the leaves' against the
+//! source's and the coarse levels' against the source's mip chain as JPEGs (a coarser texel
+//! holds more detail, and costs more).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -300,6 +302,22 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
             texels as f64 / 1e6,
             jpeg as f64 / texels.max(1) as f64,
         );
+        // Like for like: a hierarchy carries the texture at every level's density, as the
+        // source's mip chain does; coarser texels hold more detail each, and cost more.
+        let chain = mip_chain_jpeg(texture, args.quality);
+        let (leaf_ref, coarse_ref) = (&chain[0], &chain[1..]);
+        let coarse_bytes: usize = coarse_ref.iter().map(|m| m.0).sum();
+        let coarse_texels: u64 = coarse_ref.iter().map(|m| m.1).sum();
+        println!(
+            "  the source's mip chain as JPEGs q{}: level 0 {:.3} bytes a texel, levels 1–{} \
+             {:.2} MB for {:.1} M texels = {:.3} bytes a texel",
+            args.quality,
+            leaf_ref.0 as f64 / leaf_ref.1.max(1) as f64,
+            coarse_ref.len(),
+            coarse_bytes as f64 / 1e6,
+            coarse_texels as f64 / 1e6,
+            coarse_bytes as f64 / coarse_texels.max(1) as f64,
+        );
         let per_texel = |b: &TextureBytes| b.jpeg_bytes as f64 / b.covered_texels.max(1) as f64;
         let coarse = TextureBytes {
             fragments: all.fragments - t.leaves.fragments,
@@ -308,20 +326,52 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
             header_bytes: all.header_bytes - t.leaves.header_bytes,
             ..TextureBytes::default()
         };
-        for (name, b) in [("leaves", &t.leaves), ("coarse levels", &coarse)] {
+        let reference = [
+            leaf_ref.0 as f64 / leaf_ref.1.max(1) as f64,
+            coarse_bytes as f64 / coarse_texels.max(1) as f64,
+        ];
+        for ((name, b), r) in [("leaves", &t.leaves), ("coarse levels", &coarse)]
+            .into_iter()
+            .zip(reference)
+        {
             println!(
                 "    {name}: {} fragments, {:.2} MB for {:.1} M covered texels = {:.3} bytes a \
-                 texel ({:.3} without the JPEG headers, {:.1}% of the bytes)",
+                 texel ({:.3} without the JPEG headers, {:.1}% of the bytes); {:.2}x the \
+                 source's mip chain at that density",
                 b.fragments,
                 b.jpeg_bytes as f64 / 1e6,
                 b.covered_texels as f64 / 1e6,
                 per_texel(b),
                 (b.jpeg_bytes - b.header_bytes) as f64 / b.covered_texels.max(1) as f64,
                 100.0 * b.header_bytes as f64 / b.jpeg_bytes.max(1) as f64,
+                per_texel(b) / r.max(1e-12),
             );
         }
     }
     Ok(())
+}
+
+/// The texture's mip chain (each level half the last in linear light, down to 64 texels a
+/// side) as JPEGs of `quality`: per level, its bytes and texels.
+fn mip_chain_jpeg(texture: &mesh::Texture, quality: u8) -> Vec<(usize, u64)> {
+    let mut halved: Option<mesh::Texture> = None;
+    let mut chain = Vec::new();
+    loop {
+        let level = halved.as_ref().unwrap_or(texture);
+        let (w, h) = (level.width(), level.height());
+        chain.push((
+            encode_jpeg(level, quality).len(),
+            u64::from(w) * u64::from(h),
+        ));
+        if w.min(h) < 128 {
+            return chain;
+        }
+        let texels = crate::normals::half(level.texels(), w as usize, h as usize);
+        match mesh::Texture::from_texels(w / 2, h / 2, texels) {
+            Some(t) => halved = Some(t),
+            None => return chain,
+        }
+    }
 }
 
 fn bench(args: &Args, scan: &Source, dir: &Path) -> Result<()> {

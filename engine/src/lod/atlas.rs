@@ -12,7 +12,9 @@
 //!    projected orthogonally onto the plane of that normal (every triangle keeps its
 //!    orientation, so nothing folds) and turned to its principal axes for a tight rectangle. A chart of fewer than `SMALL_CHART_TEXELS`
 //!    texels then joins the neighbouring chart it shares most edges with, where it can be
-//!    projected along that chart's axis (within 75°).
+//!    projected along that chart's axis (within 75°). The build weighs these charts against
+//!    the whole patch as one chart on its mean plane ([`super::planar_chart`]) and keeps the
+//!    layout that costs fewer JPEG blocks a texel ([`Layout::blocks_per_texel`]).
 //! 2. **Packing**: rectangles with a gutter of [`GUTTER`] texels on every side, tallest first
 //!    on shelves; the texel size shrinks (coarser texels) until the atlas fits
 //!    [`MAX_TEXELS`].
@@ -42,7 +44,7 @@ pub const GUTTER: u32 = 2;
 /// Chart rectangles are whole JPEG blocks (8×8 luminance texels), so no block holds two
 /// charts' texels: a block that does costs as much as a detailed one, and most of a small
 /// chart's blocks are on its edge.
-const BLOCK: u32 = 8;
+pub(crate) const BLOCK: u32 = 8;
 /// Most texels of one patch's atlas (2048²): bounds the build's memory per patch.
 pub const MAX_TEXELS: u64 = 1 << 22;
 /// Longest atlas side.
@@ -170,6 +172,42 @@ pub struct Layout {
     pub corners: Vec<Vec2>,
     pub texel_size: f32,
     pub charts: usize,
+}
+
+/// Weight of an 8×8 block no triangle touches against one a triangle does, in
+/// [`Layout::blocks_per_texel`]: push-pull fills it smoothly, and the JPEG codes it in a few bytes.
+const EMPTY_BLOCK: f64 = 0.1;
+
+impl Layout {
+    /// An estimate of the atlas' JPEG bytes a texel of surface, in blocks: the 8×8 blocks
+    /// under a triangle's bounding box, and [`EMPTY_BLOCK`] of each other block, over the
+    /// texels of the triangles' area. The build keeps the cheaper of two layouts by it
+    /// ([`super::planar_chart::best_layout`]): texels alone would count the empty corners of
+    /// one chart's rectangle as dearly as the edges of twenty small charts, and a layout that
+    /// stretches texels over slopes holds fewer of them (less of the surface's detail) for its
+    /// bytes.
+    pub fn blocks_per_texel(&self) -> f64 {
+        let b = BLOCK as f32;
+        let (bw, bh) = (
+            self.width.div_ceil(BLOCK) as usize,
+            self.height.div_ceil(BLOCK) as usize,
+        );
+        let mut touched = vec![false; bw * bh];
+        let mut texels = 0f64;
+        for c in self.corners.chunks_exact(3) {
+            let (c0, c1, c2) = (c[0], c[1], c[2]);
+            texels += f64::from((c1 - c0).perp_dot(c2 - c0).abs() * 0.5);
+            let lo = (c0.min(c1).min(c2) / b).floor().max(Vec2::ZERO);
+            let hi = (c0.max(c1).max(c2) / b).ceil();
+            for y in lo.y as usize..(hi.y as usize).min(bh) {
+                for x in lo.x as usize..(hi.x as usize).min(bw) {
+                    touched[y * bw + x] = true;
+                }
+            }
+        }
+        let hit = touched.iter().filter(|&&t| t).count() as f64;
+        (hit + EMPTY_BLOCK * (touched.len() as f64 - hit)) / texels.max(1.0)
+    }
 }
 
 /// Charts and packs the triangles `indices` over `positions` at `texel_size` world units per
@@ -401,7 +439,12 @@ fn merge_small_charts(
 }
 
 /// In-plane axes for a chart projected along `axis`: the principal axes of its vertices.
-fn plane_axes(axis: Vec3, tris: &[u32], indices: &[u32], positions: &[[f32; 3]]) -> (Vec3, Vec3) {
+pub(crate) fn plane_axes(
+    axis: Vec3,
+    tris: &[u32],
+    indices: &[u32],
+    positions: &[[f32; 3]],
+) -> (Vec3, Vec3) {
     let (u0, v0) = axis.any_orthonormal_pair();
     let mut pts: Vec<Vec2> = Vec::with_capacity(tris.len() * 3);
     for &f in tris {
@@ -458,23 +501,7 @@ fn pack(positions: &[[f32; 3]], indices: &[u32], charts: &[Chart], texel_size: f
         let h = (ext.y.ceil() as u32).saturating_add(2 * GUTTER + 1);
         rects.push((w.next_multiple_of(BLOCK), h.next_multiple_of(BLOCK), ci));
     }
-    rects.sort_by(|a, b| b.1.cmp(&a.1).then(b.0.cmp(&a.0)));
-    let area: f64 = rects.iter().map(|r| r.0 as f64 * r.1 as f64).sum();
-    let widest = rects.iter().map(|r| r.0).max().unwrap_or(1);
-    let width = ((area.sqrt() * 1.1).ceil() as u32).max(widest).max(1);
-    let (mut x, mut y, mut shelf) = (0u32, 0u32, 0u32);
-    let mut origin = vec![(0u32, 0u32); charts.len()];
-    for &(w, h, ci) in &rects {
-        if x + w > width {
-            y = y.saturating_add(shelf);
-            x = 0;
-            shelf = 0;
-        }
-        origin[ci] = (x, y);
-        x += w;
-        shelf = shelf.max(h);
-    }
-    let height = y.saturating_add(shelf).max(1);
+    let (width, height, origin) = shelf_pack(&mut rects);
     for (ci, chart) in charts.iter().enumerate() {
         let o = Vec2::new(origin[ci].0 as f32, origin[ci].1 as f32);
         for &f in &chart.triangles {
@@ -490,6 +517,32 @@ fn pack(positions: &[[f32; 3]], indices: &[u32], charts: &[Chart], texel_size: f
         texel_size,
         charts: charts.len(),
     }
+}
+
+/// Places rectangles `(width, height, id)` on shelves, tallest first, in an atlas about
+/// square: its width and height (the extent the rectangles reach) and each id's top-left
+/// corner. Rectangles whose sides are multiples of [`BLOCK`] keep every corner on the block
+/// grid.
+pub(crate) fn shelf_pack(rects: &mut [(u32, u32, usize)]) -> (u32, u32, Vec<(u32, u32)>) {
+    rects.sort_by(|a, b| b.1.cmp(&a.1).then(b.0.cmp(&a.0)));
+    let area: f64 = rects.iter().map(|r| r.0 as f64 * r.1 as f64).sum();
+    let widest = rects.iter().map(|r| r.0).max().unwrap_or(1);
+    let limit = ((area.sqrt() * 1.1).ceil() as u32).max(widest).max(1);
+    let (mut x, mut y, mut shelf, mut width) = (0u32, 0u32, 0u32, 1u32);
+    let ids = rects.iter().map(|r| r.2 + 1).max().unwrap_or(0);
+    let mut origin = vec![(0u32, 0u32); ids];
+    for &(w, h, id) in rects.iter() {
+        if x.saturating_add(w) > limit {
+            y = y.saturating_add(shelf);
+            x = 0;
+            shelf = 0;
+        }
+        origin[id] = (x, y);
+        x = x.saturating_add(w);
+        width = width.max(x);
+        shelf = shelf.max(h);
+    }
+    (width, y.saturating_add(shelf).max(1), origin)
 }
 
 /// Bakes `source` into the images `maps` of the atlas `layout` (corner order as in the

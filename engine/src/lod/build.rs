@@ -25,6 +25,7 @@ use super::fragment_quality::{self, Features};
 use super::grouping::{PatchOutline, group_patches};
 use super::ingest::{Ingest, Ingested};
 use super::patch::{BuildPatch, ScratchFile, edge_ends};
+use super::planar_chart;
 use super::segsimplify::Simplifier;
 use super::simplify::{merge, simplify_group, split_tracked};
 use super::vertex_order::{self, VertexOrder};
@@ -1328,7 +1329,7 @@ fn leaf_atlas(
 ) -> PatchTexture {
     let texel = atlas::source_texel_size(&patch.positions, &patch.indices, faces, textures)
         .unwrap_or_else(|| fallback_texel_size(patch));
-    let layout = atlas::layout(&patch.positions, &patch.indices, texel);
+    let layout = planar_chart::best_layout(&patch.positions, &patch.indices, texel);
     let source = SourceColors {
         indices: &patch.indices,
         colors: &patch.colors,
@@ -1443,7 +1444,7 @@ fn coarse_atlases(
     products
         .iter()
         .map(|p| {
-            let layout = atlas::layout(&p.positions, &p.indices, texel);
+            let layout = planar_chart::best_layout(&p.positions, &p.indices, texel);
             let source = Resampled {
                 positions: &p.positions,
                 indices: &p.indices,

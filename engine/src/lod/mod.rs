@@ -23,6 +23,7 @@ pub mod nearest;
 pub mod parallelogram;
 pub mod partition;
 pub mod patch;
+pub mod planar_chart;
 pub mod rangecoder;
 pub mod segsimplify;
 pub mod simplify;
