@@ -180,7 +180,7 @@ const EMPTY_BLOCK: f64 = 0.1;
 
 impl Layout {
     /// An estimate of the atlas' JPEG bytes a texel of surface, in blocks: the 8×8 blocks
-    /// under a triangle's bounding box, and [`EMPTY_BLOCK`] of each other block, over the
+    /// under a triangle's bounding box, and `EMPTY_BLOCK` (0.1) of each other block, over the
     /// texels of the triangles' area. The build keeps the cheaper of two layouts by it
     /// ([`super::planar_chart::best_layout`]): texels alone would count the empty corners of
     /// one chart's rectangle as dearly as the edges of twenty small charts, and a layout that

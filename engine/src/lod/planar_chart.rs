@@ -14,7 +14,7 @@
 //! same count: the mean density is kept, its spread follows the slope).
 //!
 //! Triangles that face away from the plane (their projection folds over their neighbours')
-//! or are squeezed to a sliver ([`SQUEEZE`]) take charts made afresh, each in its own
+//! or are squeezed to a sliver (`SQUEEZE`) take charts made afresh, each in its own
 //! rectangle; so does any triangle whose projection still overlaps another's, found by
 //! rasterising the plane's texel centres, a few rounds. A patch where more than a tenth of
 //! the triangles would be charted afresh gets no planar chart.
@@ -36,7 +36,7 @@ const ROUNDS: usize = 4;
 
 /// The cheaper atlas layout of a patch at `texel_size` world units per texel: charts made
 /// afresh or the planar chart, by [`Layout::blocks_per_texel`] (an estimate of JPEG bytes a
-/// texel of surface). A planar chart of at most [`FEW`] pieces (its plane and the fresh
+/// texel of surface). A planar chart of at most `FEW` (40) pieces (its plane and the fresh
 /// charts of a few folded triangles) is kept without charting afresh.
 pub fn best_layout(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Layout {
     match layout(positions, indices, texel_size) {
