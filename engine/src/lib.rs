@@ -18,3 +18,5 @@ pub mod progress;
 pub mod render;
 pub mod segment;
 pub mod select;
+#[cfg(test)]
+pub(crate) mod testing;

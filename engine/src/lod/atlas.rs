@@ -1139,13 +1139,7 @@ mod tests {
         // The rounds found on bit rows against the plain definition (every empty texel with
         // a filled 8-neighbour, from the texels filled before the round), on widths either
         // side of a word and masks from sparse to dense.
-        let mut s = 0x9e37_79b9_u32;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            s
-        };
+        let mut next = crate::testing::xorshift(0x9e37_79b9);
         for (w, h) in [
             (1, 1),
             (5, 3),

@@ -1292,13 +1292,7 @@ fn measure_atlas(
         let (w, h) = (image.width() as usize, image.height() as usize);
         // The texels the bake sampled (as the features counted them), else those inside the
         // triangles.
-        let found;
-        let covered = if covered.len() == w * h {
-            covered
-        } else {
-            found = fragment_quality::coverage(w, h, uvs);
-            &found[..]
-        };
+        let covered = fragment_quality::covered_or_found(covered, w, h, uvs);
         let back = mesh::Texture::decode(jpeg).map_err(io::Error::other)?;
         let ssim = fragment_quality::ssim_map(image, &back)
             .ok_or_else(|| io::Error::other("the JPEG decodes to another size"))?;

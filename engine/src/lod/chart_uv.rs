@@ -20,6 +20,7 @@
 //! relative to the patch minimum, then rounded to f32 ([`evaluate`]; `static/js/lod/decode.js`
 //! does the same in JavaScript's doubles).
 
+use super::patch::find_root;
 use glam::DVec3;
 
 /// A chart's map: `[a0, a1, a2, t]` for `u`, then the same for `v`.
@@ -30,21 +31,13 @@ pub type ChartMap = [f32; 8];
 /// `u32::MAX`.
 pub fn charts(indices: &[u32], vertex_count: usize) -> (Vec<u32>, usize) {
     let mut parent: Vec<u32> = (0..vertex_count as u32).collect();
-    fn find(parent: &mut [u32], mut v: u32) -> u32 {
-        while parent[v as usize] != v {
-            let up = parent[parent[v as usize] as usize];
-            parent[v as usize] = up;
-            v = up;
-        }
-        v
-    }
     let valid = |v: u32| (v as usize) < vertex_count;
     for t in indices.chunks_exact(3) {
         if !t.iter().all(|&v| valid(v)) {
             continue;
         }
         for &v in &t[1..] {
-            let (a, b) = (find(&mut parent, t[0]), find(&mut parent, v));
+            let (a, b) = (find_root(&mut parent, t[0]), find_root(&mut parent, v));
             // The larger root joins the smaller (any rule gives the same sets).
             parent[a.max(b) as usize] = a.min(b);
         }
@@ -55,7 +48,7 @@ pub fn charts(indices: &[u32], vertex_count: usize) -> (Vec<u32>, usize) {
         if !t.iter().all(|&v| valid(v)) {
             continue;
         }
-        let r = find(&mut parent, t[0]) as usize;
+        let r = find_root(&mut parent, t[0]) as usize;
         if label[r] == u32::MAX {
             label[r] = count as u32;
             count += 1;
@@ -63,7 +56,7 @@ pub fn charts(indices: &[u32], vertex_count: usize) -> (Vec<u32>, usize) {
     }
     let chart = (0..vertex_count as u32)
         .map(|v| {
-            let r = find(&mut parent, v) as usize;
+            let r = find_root(&mut parent, v) as usize;
             label[r]
         })
         .collect();

@@ -30,6 +30,7 @@
 use super::patch::{edge_ends, edge_runs};
 use crate::mesh::Texture;
 use glam::Vec3;
+use std::borrow::Cow;
 
 /// Smallest change of the surface LoG response (in mean edges) across a zero crossing for it
 /// to count as a feature point.
@@ -60,15 +61,8 @@ pub fn features(
     covered: Option<&[bool]>,
 ) -> Features {
     let (w, h) = (image.width() as usize, image.height() as usize);
-    let found;
-    let covered = match covered.filter(|c| c.len() == w * h) {
-        Some(c) => c,
-        None => {
-            found = coverage(w, h, uvs);
-            &found[..]
-        }
-    };
-    let (texture, covered_texels) = texture_density(image, covered);
+    let covered = covered_or_found(covered.unwrap_or_default(), w, h, uvs);
+    let (texture, covered_texels) = texture_density(image, &covered);
     Features {
         surface: surface_features(positions, indices),
         texture,
@@ -169,6 +163,22 @@ pub fn surface_features(positions: &[[f32; 3]], indices: &[u32]) -> f32 {
         }
     }
     crossings as f32 / interior.max(1) as f32
+}
+
+/// The covered texels of a `w × h` atlas: `covered` where it is that atlas' record (the
+/// bake's, [`super::atlas::PatchTexture::covered`]), else found from the corners' `uvs`
+/// ([`coverage`]).
+pub fn covered_or_found<'a>(
+    covered: &'a [bool],
+    w: usize,
+    h: usize,
+    uvs: &[[f32; 2]],
+) -> Cow<'a, [bool]> {
+    if covered.len() == w * h {
+        Cow::Borrowed(covered)
+    } else {
+        Cow::Owned(coverage(w, h, uvs))
+    }
 }
 
 /// Texture zero crossings per covered texel (module docs).

@@ -259,13 +259,8 @@ mod tests {
             }
         }
         let bvh = Nearest::new(tris.clone());
-        let mut s = 12345u32;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            s as f32 / u32::MAX as f32
-        };
+        let mut rng = crate::testing::xorshift(12345);
+        let mut next = || rng() as f32 / u32::MAX as f32;
         for _ in 0..500 {
             let p = Vec3::new(next() * 34.0 - 2.0, next() * 34.0 - 2.0, next() * 6.0 - 3.0);
             let hit = bvh.closest(p, Vec3::ZERO, 0.0).expect("a hit");

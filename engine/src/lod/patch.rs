@@ -19,6 +19,17 @@ pub struct BuildPatch {
     pub indices: Vec<u32>,
 }
 
+/// The root of `v` in the union-find forest `parent` (every root its own parent), halving
+/// the path on the way.
+pub fn find_root(parent: &mut [u32], mut v: u32) -> u32 {
+    while parent[v as usize] != v {
+        let up = parent[parent[v as usize] as usize];
+        parent[v as usize] = up;
+        v = up;
+    }
+    v
+}
+
 /// Undirected edge between two original vertices, as one sortable key.
 #[inline]
 pub fn edge_key(a: u32, b: u32) -> u64 {

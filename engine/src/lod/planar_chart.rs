@@ -25,7 +25,7 @@
 use glam::{Vec2, Vec3};
 
 use super::atlas::{self, BLOCK, GUTTER, Layout, MAX_SIDE, MAX_TEXELS, shelf_pack};
-use super::patch::edge_key;
+use super::patch::{edge_ends, edge_key, find_root};
 
 /// A triangle whose projected area over its area is below the patch's mean over this much
 /// (about 86° from the plane on a flat patch) is charted afresh.
@@ -64,11 +64,15 @@ pub fn layout(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Optio
         return None;
     }
     let p = |v: u32| Vec3::from(positions[v as usize]);
-    let mut sum = Vec3::ZERO;
-    for tri in indices.chunks_exact(3) {
-        sum += (p(tri[1]) - p(tri[0])).cross(p(tri[2]) - p(tri[0]));
-    }
-    let axis = sum.normalize_or_zero();
+    // Each triangle's cross product: twice its area along its normal.
+    let crosses: Vec<Vec3> = indices
+        .chunks_exact(3)
+        .map(|tri| (p(tri[1]) - p(tri[0])).cross(p(tri[2]) - p(tri[0])))
+        .collect();
+    let axis = crosses
+        .iter()
+        .fold(Vec3::ZERO, |sum, &c| sum + c)
+        .normalize_or_zero();
     if axis == Vec3::ZERO {
         return None;
     }
@@ -77,13 +81,10 @@ pub fn layout(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Optio
     let plane = |i: u32| Vec2::new(p(i).dot(u), p(i).dot(v));
     let (mut plane_area, mut world_area) = (0f64, 0f64);
     let mut signed = Vec::with_capacity(t);
-    for tri in indices.chunks_exact(3) {
+    for (tri, cross) in indices.chunks_exact(3).zip(&crosses) {
         let (a, b, c) = (plane(tri[0]), plane(tri[1]), plane(tri[2]));
         let area = 0.5 * (b - a).perp_dot(c - a);
-        let world = 0.5
-            * (p(tri[1]) - p(tri[0]))
-                .cross(p(tri[2]) - p(tri[0]))
-                .length();
+        let world = 0.5 * cross.length();
         plane_area += f64::from(area);
         world_area += f64::from(world);
         signed.push((area, world));
@@ -225,7 +226,7 @@ fn pieces(indices: &[u32], fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
         })
         .collect();
     edges.sort_unstable();
-    let mut parent: Vec<usize> = (0..t).collect();
+    let mut parent: Vec<u32> = (0..t as u32).collect();
     // The texel coordinate of vertex `v` in the triangle of corner `c`.
     let at = |c: usize, v: u32| -> Vec2 {
         let f = c / 3;
@@ -234,23 +235,24 @@ fn pieces(indices: &[u32], fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
     };
     for run in edges.chunk_by(|a, b| a.0 == b.0) {
         let first = run[0].1 as usize;
-        let (a, b) = ((run[0].0 >> 32) as u32, run[0].0 as u32);
+        let (a, b) = edge_ends(run[0].0);
         for &(_, c) in &run[1..] {
             let c = c as usize;
             let same = fresh[first / 3] == fresh[c / 3]
                 && at(first, a) == at(c, a)
                 && at(first, b) == at(c, b);
             if same {
-                let (x, y) = (find(&mut parent, first / 3), find(&mut parent, c / 3));
-                parent[x.max(y)] = x.min(y);
+                let x = find_root(&mut parent, (first / 3) as u32);
+                let y = find_root(&mut parent, (c / 3) as u32);
+                parent[x.max(y) as usize] = x.min(y);
             }
         }
     }
     let mut id = vec![u32::MAX; t];
     let mut next = 0u32;
-    (0..t)
+    (0..t as u32)
         .map(|f| {
-            let root = find(&mut parent, f);
+            let root = find_root(&mut parent, f) as usize;
             if id[root] == u32::MAX {
                 id[root] = next;
                 next += 1;
@@ -258,15 +260,6 @@ fn pieces(indices: &[u32], fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
             id[root]
         })
         .collect()
-}
-
-/// Union-find root of `i`, halving the path.
-fn find(parent: &mut [usize], mut i: usize) -> usize {
-    while parent[i] != i {
-        parent[i] = parent[parent[i]];
-        i = parent[i];
-    }
-    i
 }
 
 /// The triangles of `layout` (but those to `skip`: charted afresh, each chart in its own
@@ -411,13 +404,8 @@ mod tests {
     #[test]
     fn spans_hold_the_texel_centres_inside_a_triangle() {
         // Triangles of every orientation and size, against a test of each texel centre.
-        let mut seed = 0x2545_f491_u32;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 17;
-            seed ^= seed << 5;
-            (seed % 4000) as f32 / 100.0
-        };
+        let mut rng = crate::testing::xorshift(0x2545_f491);
+        let mut next = || (rng() % 4000) as f32 / 100.0;
         for _ in 0..300 {
             let c = [
                 Vec2::new(next(), next()),

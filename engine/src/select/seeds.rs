@@ -627,17 +627,7 @@ pub fn lasso(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Vec<bool>, Sele
 mod tests {
     use super::*;
     use crate::select::buffers::OwnedBuffers;
-
-    /// A deterministic stream of pseudo-random numbers (Marsaglia's xorshift32).
-    fn xorshift(seed: u32) -> impl FnMut() -> u32 {
-        let mut state = seed;
-        move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state
-        }
-    }
+    use crate::testing::xorshift;
 
     /// The radix heap pops what a binary heap pops, for Dijkstra-like (never decreasing)
     /// pushes: keys spread over every bucket, ties and repeats.
