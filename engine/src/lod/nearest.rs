@@ -16,7 +16,7 @@ const LEAF: usize = 4;
 struct Node {
     lo: Vec3,
     hi: Vec3,
-    /// Leaf: first triangle in `order` and count; inner: `first` is the left child (the right
+    /// Leaf: first triangle in `slots` and count; inner: `first` is the left child (the right
     /// one follows its subtree), count 0.
     first: u32,
     count: u32,
@@ -27,8 +27,24 @@ struct Node {
 pub struct Nearest {
     tris: Vec<[Vec3; 3]>,
     normals: Vec<Vec3>,
-    order: Vec<u32>,
+    /// The triangles in leaf order (a leaf's are side by side), each with its box: a leaf's
+    /// triangles farther than the best so far by their boxes skip the exact test.
+    slots: Vec<Slot>,
     nodes: Vec<Node>,
+    /// Each node's parent (the root's is itself), for walks that start at a leaf.
+    parent: Vec<u32>,
+    /// The leaf holding each triangle.
+    leaf_of: Vec<u32>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    corners: [Vec3; 3],
+    normal: Vec3,
+    lo: Vec3,
+    hi: Vec3,
+    /// The triangle's index as given to [`Nearest::new`].
+    id: u32,
 }
 
 /// The closest point found: triangle index (as given to [`Nearest::new`]), its barycentric
@@ -47,7 +63,7 @@ impl Nearest {
     }
 
     pub fn new(tris: Vec<[Vec3; 3]>) -> Nearest {
-        let normals = tris
+        let normals: Vec<Vec3> = tris
             .iter()
             .map(|t| (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero())
             .collect();
@@ -62,11 +78,36 @@ impl Nearest {
         if !tris.is_empty() {
             build(&boxes, &centroids, &mut order, 0, &mut nodes);
         }
+        let mut parent = vec![0u32; nodes.len()];
+        let mut leaf_of = vec![0u32; tris.len()];
+        for (i, node) in nodes.iter().enumerate() {
+            if node.count > 0 {
+                let range = node.first as usize..(node.first + node.count) as usize;
+                for &t in &order[range] {
+                    leaf_of[t as usize] = i as u32;
+                }
+            } else {
+                parent[node.first as usize] = i as u32;
+                parent[node.right as usize] = i as u32;
+            }
+        }
+        let slots = order
+            .iter()
+            .map(|&t| Slot {
+                corners: tris[t as usize],
+                normal: normals[t as usize],
+                lo: boxes[t as usize].0,
+                hi: boxes[t as usize].1,
+                id: t,
+            })
+            .collect();
         Nearest {
             tris,
             normals,
-            order,
+            slots,
             nodes,
+            parent,
+            leaf_of,
         }
     }
 
@@ -77,9 +118,13 @@ impl Nearest {
     }
 
     /// [`Nearest::closest`], first trying triangle `hint` (the previous query's, when queries
-    /// come in coherent order as a texel scan's do): its distance prunes most of the tree from
-    /// the start. The same distance as without the hint; between triangles exactly as close,
-    /// the hint is kept.
+    /// come in coherent order as a texel scan's do). The walk then starts at the hint's leaf
+    /// and climbs to the root, searching each sibling subtree whose box is nearer than the
+    /// best so far: with the hint's distance as the bound from the start, that is about one
+    /// box a level, where a walk down from the root tests both children of every node on the
+    /// way. The same distance as without the hint; between triangles exactly as close, the
+    /// hint is kept (which of several other equally close triangles wins may differ from a
+    /// walk down from the root).
     pub fn closest_near(
         &self,
         p: Vec3,
@@ -88,59 +133,109 @@ impl Nearest {
         hint: Option<u32>,
     ) -> Option<Hit> {
         let filter = facing != Vec3::ZERO;
-        let mut best: Option<Hit> = None;
-        let mut best_d = f32::INFINITY;
-        if let Some(t) = hint.filter(|&t| (t as usize) < self.tris.len())
-            && (!filter || self.normals[t as usize].dot(facing) >= min_dot)
-        {
-            let (q, bary) = closest_on_triangle(p, &self.tris[t as usize]);
-            best_d = (q - p).length_squared();
-            best = Some(Hit {
+        let mut best = Best {
+            hit: None,
+            d: f32::INFINITY,
+        };
+        let hint = hint.filter(|&t| {
+            (t as usize) < self.tris.len()
+                && (!filter || self.normals[t as usize].dot(facing) >= min_dot)
+        });
+        let Some(t) = hint else {
+            if !self.nodes.is_empty() {
+                self.descend(0, p, facing, min_dot, &mut best);
+            }
+            return best.hit;
+        };
+        self.consider(t, p, &mut best);
+        let mut node = self.leaf_of[t as usize];
+        self.descend(node, p, facing, min_dot, &mut best);
+        while node != 0 {
+            let up = self.parent[node as usize];
+            let parent = &self.nodes[up as usize];
+            let sibling = if parent.first == node {
+                parent.right
+            } else {
+                parent.first
+            };
+            let s = &self.nodes[sibling as usize];
+            if box_distance_sq(p, s.lo, s.hi) < best.d {
+                self.descend(sibling, p, facing, min_dot, &mut best);
+            }
+            node = up;
+        }
+        best.hit
+    }
+
+    /// Tests triangle `t`, keeping it where it is nearer than the best so far.
+    #[inline]
+    fn consider(&self, t: u32, p: Vec3, best: &mut Best) {
+        self.consider_corners(t, &self.tris[t as usize], p, best);
+    }
+
+    /// [`Self::consider`] with the triangle's corners at hand.
+    #[inline]
+    fn consider_corners(&self, t: u32, corners: &[Vec3; 3], p: Vec3, best: &mut Best) {
+        let (q, bary) = closest_on_triangle(p, corners);
+        let d = (q - p).length_squared();
+        if d < best.d {
+            best.d = d;
+            best.hit = Some(Hit {
                 triangle: t,
                 bary,
-                distance_sq: best_d,
+                distance_sq: d,
             });
         }
+    }
+
+    /// Searches the subtree at `root` depth-first, the nearer child first, pruning subtrees
+    /// no nearer than the best so far.
+    fn descend(&self, root: u32, p: Vec3, facing: Vec3, min_dot: f32, best: &mut Best) {
+        let filter = facing != Vec3::ZERO;
         // The walk holds about one entry a level of a median-split tree: on the stack, with
         // no allocation per query.
         let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
-        if !self.nodes.is_empty() {
-            stack.push(0);
-        }
+        stack.push(root);
         while let Some(i) = stack.pop() {
             let node = &self.nodes[i as usize];
-            if box_distance_sq(p, node.lo, node.hi) >= best_d {
+            if box_distance_sq(p, node.lo, node.hi) >= best.d {
                 continue;
             }
             if node.count > 0 {
                 let range = node.first as usize..(node.first + node.count) as usize;
-                for &t in &self.order[range] {
-                    if filter && self.normals[t as usize].dot(facing) < min_dot {
+                for slot in &self.slots[range] {
+                    if filter && slot.normal.dot(facing) < min_dot
+                        || box_distance_sq(p, slot.lo, slot.hi) >= best.d
+                    {
                         continue;
                     }
-                    let (q, bary) = closest_on_triangle(p, &self.tris[t as usize]);
-                    let d = (q - p).length_squared();
-                    if d < best_d {
-                        best_d = d;
-                        best = Some(Hit {
-                            triangle: t,
-                            bary,
-                            distance_sq: d,
-                        });
-                    }
+                    self.consider_corners(slot.id, &slot.corners, p, best);
                 }
                 continue;
             }
             let (l, r) = (node.first, node.right);
             let dl = box_distance_sq(p, self.nodes[l as usize].lo, self.nodes[l as usize].hi);
             let dr = box_distance_sq(p, self.nodes[r as usize].lo, self.nodes[r as usize].hi);
-            // Nearer child popped first.
-            let (near, far) = if dl <= dr { (l, r) } else { (r, l) };
-            stack.push(far);
-            stack.push(near);
+            // Nearer child popped first; a child no nearer than the best is not pushed.
+            let (near, far, dn, df) = if dl <= dr {
+                (l, r, dl, dr)
+            } else {
+                (r, l, dr, dl)
+            };
+            if df < best.d {
+                stack.push(far);
+            }
+            if dn < best.d {
+                stack.push(near);
+            }
         }
-        best
     }
+}
+
+/// The nearest hit so far and its squared distance.
+struct Best {
+    hit: Option<Hit>,
+    d: f32,
 }
 
 fn build(

@@ -15,9 +15,11 @@
 //!
 //! Triangles that face away from the plane (their projection folds over their neighbours')
 //! or are squeezed to a sliver (`SQUEEZE`) take charts made afresh, each in its own
-//! rectangle; so does any triangle whose projection still overlaps another's, found by
-//! rasterising the plane's texel centres, a few rounds. A patch where more than a tenth of
-//! the triangles would be charted afresh gets no planar chart.
+//! rectangle; so does any triangle whose projection still overlaps another's, a few rounds.
+//! Overlaps are looked for where the winding number of the chart's border reaches two
+//! (`overlap_rows`, the border's crossings of each texel row), and only there by
+//! rasterising the triangles over the plane's texel centres. A patch where more than a
+//! tenth of the triangles would be charted afresh gets no planar chart.
 //!
 //! Texture coordinates stay an affine function of position on every chart, so the patch
 //! blob stores one map per chart, not coordinates per vertex ([`super::chart_uv`]).
@@ -25,7 +27,7 @@
 use glam::{Vec2, Vec3};
 
 use super::atlas::{self, BLOCK, GUTTER, Layout, MAX_SIDE, MAX_TEXELS, shelf_pack};
-use super::patch::{edge_ends, edge_key, find_root};
+use super::patch::{edge_corners, edge_ends, find_root};
 
 /// A triangle whose projected area over its area is below the patch's mean over this much
 /// (about 86° from the plane on a flat patch) is charted afresh.
@@ -101,7 +103,10 @@ pub fn layout(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Optio
     let scale = 1.0 / (texel_size * ratio.sqrt());
     for _ in 0..ROUNDS {
         let layout = with_fresh(positions, indices, &bad, |i| plane(i) * scale, texel_size)?;
-        let clashes = overlapping_triangles(&layout, &bad);
+        let Some(rows) = overlap_rows(&layout, indices, positions.len(), &bad) else {
+            return Some(layout);
+        };
+        let clashes = overlapping_triangles(&layout, &bad, &rows);
         if clashes.is_empty() {
             return Some(layout);
         }
@@ -154,14 +159,20 @@ fn with_fresh(
             }
         }
     }
-    pack(indices, bad, &texel, texel_size)
+    pack(indices, positions.len(), bad, &texel, texel_size)
 }
 
 /// Packs the triangles at their corners' texel coordinates `texel`: each connected piece
 /// (triangles joined across an edge whose corners have the same coordinates on both sides,
 /// planar or `fresh` alike) gets its rectangle, a gutter wide and whole blocks large.
-fn pack(indices: &[u32], fresh: &[bool], texel: &[Vec2], texel_size: f32) -> Option<Layout> {
-    let piece = pieces(indices, fresh, texel);
+fn pack(
+    indices: &[u32],
+    vertices: usize,
+    fresh: &[bool],
+    texel: &[Vec2],
+    texel_size: f32,
+) -> Option<Layout> {
+    let piece = pieces(indices, vertices, fresh, texel);
     let count = piece.iter().map(|&p| p as usize + 1).max().unwrap_or(0);
     let mut bounds = vec![(Vec2::splat(f32::MAX), Vec2::splat(f32::MIN)); count];
     for (f, &p) in piece.iter().enumerate() {
@@ -216,16 +227,10 @@ fn pack(indices: &[u32], fresh: &[bool], texel: &[Vec2], texel_size: f32) -> Opt
 }
 
 /// Each triangle's connected piece (see [`pack`]).
-fn pieces(indices: &[u32], fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
+fn pieces(indices: &[u32], vertices: usize, fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
     let t = fresh.len();
     // Every triangle edge by its vertex pair; runs of equal keys share an edge.
-    let mut edges: Vec<(u64, u32)> = (0..3 * t)
-        .map(|c| {
-            let next = c - c % 3 + (c + 1) % 3;
-            (edge_key(indices[c], indices[next]), c as u32)
-        })
-        .collect();
-    edges.sort_unstable();
+    let edges = edge_corners(indices, vertices, |_| true);
     let mut parent: Vec<u32> = (0..t as u32).collect();
     // The texel coordinate of vertex `v` in the triangle of corner `c`.
     let at = |c: usize, v: u32| -> Vec2 {
@@ -262,10 +267,85 @@ fn pieces(indices: &[u32], fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
         .collect()
 }
 
+/// Where a texel centre may lie strictly inside two of the triangles of `layout` kept (not
+/// in `skip`): for each texel row, the span of x it may be in (empty: `(∞, −∞)`), or `None`
+/// where no texel centre is, so [`overlapping_triangles`] (a texel rasterisation of the
+/// triangles) runs only where a patch folds, and there only over these spans.
+///
+/// The kept triangles all turn the same way (positive area in the plane), so the number of
+/// them holding a point off their edges is the winding number of their border around it:
+/// edges used twice, once each way, cancel (Hormann and Agathos, "The point in polygon
+/// problem for arbitrary polygons", 2001). With crossings counted half-open (an edge from
+/// `lo.y` inclusive to `hi.y` exclusive; a point right of a crossing, not on it), the count
+/// at a point is at least the number of triangles holding it strictly. So each row's
+/// crossings of the border edges alone (a few hundred edges a patch, against thousands of
+/// triangles to rasterise) find every texel centre with a winding of two or more. An edge
+/// used twice the same way or by three triangles (a fold the border does not show) gives
+/// every row its whole width.
+fn overlap_rows(
+    layout: &Layout,
+    indices: &[u32],
+    vertices: usize,
+    skip: &[bool],
+) -> Option<Vec<(f32, f32)>> {
+    const EMPTY: (f32, f32) = (f32::INFINITY, f32::NEG_INFINITY);
+    let h = layout.height as usize;
+    let everywhere = || Some(vec![(f32::NEG_INFINITY, f32::INFINITY); h]);
+    let next = |c: usize| c - c % 3 + (c + 1) % 3;
+    let edges = edge_corners(indices, vertices, |f| {
+        !skip.get(f).copied().unwrap_or(false)
+    });
+    // (row, x, ±1) where a border edge crosses the row's centre line.
+    let mut crossings: Vec<(u32, f32, i32)> = Vec::new();
+    for run in edges.chunk_by(|a, b| a.0 == b.0) {
+        match *run {
+            [(_, c)] => {
+                let c = c as usize;
+                let (p, q) = (layout.corners[c], layout.corners[next(c)]);
+                // Endpoints in y order, so an edge's crossings do not depend on its direction.
+                let (lo, hi, sign) = if p.y <= q.y { (p, q, 1) } else { (q, p, -1) };
+                // Rows whose centre y + 0.5 has lo.y <= y + 0.5 < hi.y, within the layout.
+                let mut y = (lo.y - 0.5).ceil().max(0.0);
+                while y + 0.5 < hi.y && (y as usize) < h {
+                    let py = y + 0.5;
+                    let x = lo.x + (py - lo.y) * (hi.x - lo.x) / (hi.y - lo.y);
+                    if !x.is_finite() {
+                        return everywhere();
+                    }
+                    crossings.push((y as u32, x, sign));
+                    y += 1.0;
+                }
+            }
+            // Two triangles on one edge must run it opposite ways.
+            [(_, a), (_, b)] if indices[a as usize] == indices[next(b as usize)] => {}
+            _ => return everywhere(),
+        }
+    }
+    crossings.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut rows = vec![EMPTY; h];
+    let mut any = false;
+    for row in crossings.chunk_by(|a, b| a.0 == b.0) {
+        let mut winding = 0;
+        for (i, &(y, x, sign)) in row.iter().enumerate() {
+            winding += sign;
+            // The winding holds right of x up to the next crossing: is a texel centre
+            // k + 0.5 there (x < k + 0.5 <= end)?
+            let end = row.get(i + 1).map_or(f32::INFINITY, |c| c.1);
+            if winding.abs() >= 2 && (x - 0.5).floor() + 1.0 <= end - 0.5 {
+                let span = &mut rows[y as usize];
+                *span = (span.0.min(x), span.1.max(end));
+                any = true;
+            }
+        }
+    }
+    any.then_some(rows)
+}
+
 /// The triangles of `layout` (but those to `skip`: charted afresh, each chart in its own
 /// rectangle) that share a texel centre strictly inside both (a projection folded over
-/// itself where no single triangle shows it).
-fn overlapping_triangles(layout: &Layout, skip: &[bool]) -> Vec<usize> {
+/// itself where no single triangle shows it), looked for in the spans `rows` of
+/// [`overlap_rows`].
+fn overlapping_triangles(layout: &Layout, skip: &[bool], rows: &[(f32, f32)]) -> Vec<usize> {
     let (w, h) = (layout.width as usize, layout.height as usize);
     let mut claimed = vec![u32::MAX; w * h];
     let mut clashes = Vec::new();
@@ -273,7 +353,21 @@ fn overlapping_triangles(layout: &Layout, skip: &[bool]) -> Vec<usize> {
         if skip.get(f).copied().unwrap_or(false) {
             continue;
         }
+        // Only the rows and spans where a texel centre may be held twice.
+        let (lo, hi) = (
+            c[0].y.min(c[1].y).min(c[2].y),
+            c[0].y.max(c[1].y).max(c[2].y),
+        );
+        let first = (lo.max(0.0) as usize).min(h);
+        let last = (hi.max(0.0).ceil() as usize).min(h);
+        if rows[first..last].iter().all(|r| r.0 > r.1) {
+            continue;
+        }
         inside_spans(c, w, h, 1e-4, |y, x0, x1| {
+            let (from, to) = rows[y];
+            // Centres x + 0.5 within [from, to].
+            let x0 = x0.max((from - 0.5).ceil().max(0.0) as usize);
+            let x1 = x1.min(((to - 0.5).floor() + 1.0).clamp(0.0, w as f32) as usize);
             for x in x0..x1 {
                 let i = y * w + x;
                 if claimed[i] != u32::MAX {
@@ -342,6 +436,72 @@ mod tests {
     use super::*;
     use crate::lod::height_grid;
 
+    /// Every clash of `l`, searched over its whole width and height.
+    fn clashes(l: &Layout) -> Vec<usize> {
+        let everywhere = vec![(f32::NEG_INFINITY, f32::INFINITY); l.height as usize];
+        overlapping_triangles(l, &[], &everywhere)
+    }
+
+    #[test]
+    fn overlap_rows_find_every_clash_of_a_folded_layout() {
+        // A grid of texel coordinates whose corners are shaken from none to far past their
+        // neighbours (so the grid folds over itself more and more), against the search over
+        // every texel: the spans hold every clash, and say none where there is none.
+        let mut rng = crate::testing::xorshift(0x1234_5678);
+        let mut unit = || (rng() % 10_000) as f32 / 10_000.0 - 0.5;
+        let (k, step) = (9usize, 6.0f32);
+        let mut indices = Vec::new();
+        for y in 0..k {
+            for x in 0..k {
+                let v = (y * (k + 1) + x) as u32;
+                let row = (k + 1) as u32;
+                indices.extend_from_slice(&[v, v + 1, v + row + 1, v, v + row + 1, v + row]);
+            }
+        }
+        let (mut folded, mut clean) = (0, 0);
+        for shake in [0.0f32, 0.5, 1.0, 2.0, 4.0, 8.0] {
+            for _ in 0..40 {
+                let texel: Vec<Vec2> = (0..(k + 1) * (k + 1))
+                    .map(|v| {
+                        let (x, y) = ((v % (k + 1)) as f32, (v / (k + 1)) as f32);
+                        Vec2::new(x * step + 10.0, y * step + 10.0)
+                            + Vec2::new(unit(), unit()) * shake
+                    })
+                    .collect();
+                let corners: Vec<Vec2> = indices.iter().map(|&v| texel[v as usize]).collect();
+                // Triangles turned over are left out, as the planar chart charts them afresh.
+                let skip: Vec<bool> = corners
+                    .chunks_exact(3)
+                    .map(|c| (c[1] - c[0]).perp_dot(c[2] - c[0]) <= 0.0)
+                    .collect();
+                let l = Layout {
+                    width: 80,
+                    height: 80,
+                    corners,
+                    texel_size: 1.0,
+                    charts: 1,
+                };
+                let everywhere = vec![(f32::NEG_INFINITY, f32::INFINITY); 80];
+                let all = overlapping_triangles(&l, &skip, &everywhere);
+                match overlap_rows(&l, &indices, texel.len(), &skip) {
+                    None => {
+                        assert!(all.is_empty(), "shake {shake}: clashes {all:?} unflagged");
+                        clean += 1;
+                    }
+                    Some(rows) => {
+                        assert_eq!(
+                            overlapping_triangles(&l, &skip, &rows),
+                            all,
+                            "shake {shake}"
+                        );
+                        folded += usize::from(!all.is_empty());
+                    }
+                }
+            }
+        }
+        assert!(folded > 20 && clean > 20, "{folded} folded, {clean} clean");
+    }
+
     fn texels(l: &Layout) -> f32 {
         l.corners
             .chunks_exact(3)
@@ -385,7 +545,7 @@ mod tests {
                 c.x <= (planar.width - GUTTER) as f32 && c.y <= (planar.height - GUTTER) as f32
             );
         }
-        assert!(overlapping_triangles(&planar, &[]).is_empty());
+        assert!(clashes(&planar).is_empty());
         let best = best_layout(&positions, &indices, 0.25);
         assert_eq!(best.charts, 1);
     }
@@ -398,7 +558,7 @@ mod tests {
         positions[6 * 13 + 6] = [4.5, 6.0, 0.8];
         let l = layout(&positions, &indices, 0.1).expect("a few folded triangles");
         assert!(l.charts > 1);
-        assert!(overlapping_triangles(&l, &[]).is_empty());
+        assert!(clashes(&l).is_empty());
     }
 
     #[test]
@@ -448,9 +608,9 @@ mod tests {
         positions.extend(upper.iter().map(|p| [p[0] + 4.0, p[1], p[2]]));
         indices.extend(upper_indices.iter().map(|&i| i + n));
         if let Some(l) = layout(&positions, &indices, 0.1) {
-            assert!(overlapping_triangles(&l, &[]).is_empty());
+            assert!(clashes(&l).is_empty());
         }
-        assert!(overlapping_triangles(&best_layout(&positions, &indices, 0.1), &[]).is_empty());
+        assert!(clashes(&best_layout(&positions, &indices, 0.1)).is_empty());
     }
 
     #[test]

@@ -543,6 +543,7 @@ pub fn split_tracked(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lod::patch::edge_corners;
 
     fn sheet(n: u32, id_base: u32, x0: f32) -> BuildPatch {
         let mut p = BuildPatch::default();
@@ -634,6 +635,20 @@ mod tests {
                 })
                 .collect();
             assert_eq!(edge_runs(&indices, n, skip), sorted_runs(keys));
+            // The same edges corner by corner: the counting sort gives what sorting all
+            // (key, corner) pairs gives.
+            let keep = |f: usize| !(skip && degenerate(&indices[3 * f..3 * f + 3]));
+            let mut pairs: Vec<(u64, u32)> = (0..indices.len())
+                .filter(|&c| keep(c / 3))
+                .map(|c| {
+                    (
+                        edge_key(indices[c], indices[c - c % 3 + (c + 1) % 3]),
+                        c as u32,
+                    )
+                })
+                .collect();
+            pairs.sort_unstable();
+            assert_eq!(edge_corners(&indices, n, keep), pairs);
             let mut tris: Vec<[u32; 3]> = indices
                 .chunks_exact(3)
                 .filter(|t| !(skip && degenerate(t)))

@@ -275,7 +275,22 @@ fn axis(t: f32, size: u32, wrap: Wrap) -> (usize, usize, f32) {
     let x0 = x0 as i64;
     let fix = |i: i64| -> usize {
         match wrap {
-            Wrap::Repeat => i.rem_euclid(n) as usize,
+            // After the wrap above, i is within -1..=n: one step back in, not the integer
+            // division of `rem_euclid` (kept for what rounding might leave outside).
+            Wrap::Repeat => {
+                let j = if i < 0 {
+                    i + n
+                } else if i >= n {
+                    i - n
+                } else {
+                    i
+                };
+                if (0..n).contains(&j) {
+                    j as usize
+                } else {
+                    i.rem_euclid(n) as usize
+                }
+            }
             _ => i.clamp(0, n - 1) as usize,
         }
     };
