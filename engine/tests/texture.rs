@@ -198,7 +198,8 @@ fn fragment_quality_follows_feature_density() {
         ff.jpeg_bytes + fp.jpeg_bytes
     );
     // The JPEGs went into the blobs (as the report counts them: without the standard Huffman
-    // tables, which decoding puts back): every patch decodes with its atlas.
+    // tables, JFIF segment and quantisation tables, which decoding puts back): every patch
+    // decodes with its atlas.
     let lod = LodFile::open(&out).expect("open");
     let mut bytes = 0u64;
     for node in 0..lod.nodes().len() as u32 {
@@ -207,8 +208,13 @@ fn fragment_quality_follows_feature_density() {
         mesh::Texture::decode(img).expect("the atlas is an image");
         let blob = lod.blob(node).expect("a blob");
         assert!(lod::codec::images_without_tables(blob));
+        assert!(lod::codec::images_without_headers(blob));
         let stored = lod::codec::blob_bytes(blob).expect("frames").0.image;
-        assert_eq!(stored + lod::jpegtables::STANDARD_DHT.len(), img.len());
+        let left_out = lod::jpegtables::STANDARD_DHT.len()
+            + lod::jpegtables::JFIF_APP0.len()
+            + lod::jpegtables::DQT_LEN
+            - 1;
+        assert_eq!(stored + left_out, img.len());
         bytes += stored as u64;
     }
     assert_eq!(bytes, ff.jpeg_bytes + fp.jpeg_bytes);

@@ -11,7 +11,7 @@ import { existsSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
-import { decodePatch, decodeYCoCg, DecodeError, jpegSize, predict, STANDARD_DHT, walk } from '../../static/js/lod/decode.js';
+import { decodePatch, decodeYCoCg, DecodeError, JFIF_APP0, jpegSize, predict, STANDARD_DHT, standardDqt, walk } from '../../static/js/lod/decode.js';
 import { crc32, parseBinary } from '../../static/js/lod/table.js';
 import { patchBytes } from '../../static/js/lod/stream.js';
 import { SHARED_MESHES, decoderDeps, importStatic, meshwiki, sampleMesh } from './support/env.mjs';
@@ -378,6 +378,23 @@ test('textured blobs: image section, texture coordinates and wedge vertices (han
   assert.deepEqual(Array.from(whole.image), Array.from(restored));
   assert.deepEqual(Array.from(whole.normalMap), Array.from(restored));
   assert.deepEqual(jpegSize(whole.image), { width: 32, height: 16 });
+  // Also without their JFIF segment and quantisation tables (bit 3): the quality byte first;
+  // the segment after SOI and the scaled Annex K.1 tables after the frame header come back.
+  const headless = encodeSquare(encoder, deps.meshopt, { texture: true, image: Uint8Array.from([87, ...stripped]), normalMap: Uint8Array.from([30, ...stripped]) }).blob;
+  headless[5] |= 4 | 8;
+  const headed = decodePatch(headless, grid, deps);
+  const withHeaders = (q) => [0xff, 0xd8, ...JFIF_APP0, ...sof, ...standardDqt(q), ...STANDARD_DHT, ...sos];
+  assert.deepEqual(Array.from(headed.image), withHeaders(87));
+  assert.deepEqual(Array.from(headed.normalMap), withHeaders(30));
+  assert.deepEqual(jpegSize(headed.image), { width: 32, height: 16 });
+  // Quality 50 is Annex K.1 itself (its first luminance and chrominance values), 100 all ones.
+  assert.deepEqual(Array.from(standardDqt(50).subarray(5, 9)), [16, 11, 12, 14]);
+  assert.deepEqual(Array.from(standardDqt(50).subarray(69 + 5, 69 + 9)), [17, 18, 18, 24]);
+  assert.ok(standardDqt(100).every((v, i) => i % 69 < 5 || v === 1));
+  // A quality byte out of range: the bytes after it as they are.
+  const noQuality = encodeSquare(encoder, deps.meshopt, { texture: true, image: Uint8Array.from([0, ...stripped]) }).blob;
+  noQuality[5] |= 8;
+  assert.deepEqual(Array.from(decodePatch(noQuality, grid, deps).image), Array.from(stripped));
   // Annex K.3: the DC luminance table's code length counts.
   assert.deepEqual(Array.from(STANDARD_DHT.subarray(5, 21)), [0, 1, 5, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0]);
   // A normal map declared longer than the blob.

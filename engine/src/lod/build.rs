@@ -1098,12 +1098,10 @@ impl<'a> Builder<'a> {
                         .map(|n| atlas::encode_normal_jpeg(n, NORMAL_MAP_QUALITY));
                     let blob = codec::with_images(&blob, color.as_deref(), normals.as_deref())
                         .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
-                    // Bytes as stored: without the Huffman tables where the blob says so.
-                    let saved = if codec::images_without_tables(&blob) {
-                        super::jpegtables::STANDARD_DHT.len() as u64
-                    } else {
-                        0
-                    };
+                    // Bytes as stored: without the tables and headers the blob leaves out.
+                    let saved = color.as_ref().map_or(0, |jpeg| {
+                        jpeg.len().saturating_sub(codec::stored_image_len(&blob)) as u64
+                    });
                     let measured = match (&color, &atlas.image) {
                         (Some(jpeg), Some(image)) => {
                             let mut m = measure_atlas(

@@ -78,6 +78,10 @@ const BLOB_NORMALS: u8 = 2;
 /// Blob header flag (byte 5): the sections' JPEGs are stored without their Huffman tables,
 /// which are the standard ones ([`super::jpegtables`]).
 const BLOB_STANDARD_HUFFMAN: u8 = 4;
+/// Blob header flag (byte 5), only with [`BLOB_STANDARD_HUFFMAN`]: the sections' JPEGs are
+/// also stored without their JFIF APP0 segment and quantisation tables, the standard ones
+/// scaled by the quality each section starts with ([`jpegtables::strip_headers`]).
+const BLOB_STANDARD_HEADERS: u8 = 8;
 const PAYLOAD_HEADER: usize = 52;
 /// Octahedral normal quantisation: components in `-OCT_SCALE..=OCT_SCALE` (8 bits).
 pub const OCT_SCALE: f64 = 127.0;
@@ -976,23 +980,39 @@ fn encode_split(
 }
 
 /// Appends the image sections to a blob header (12 bytes, flags at byte 5 set here): without
-/// their Huffman tables where every image present has the standard ones
-/// ([`super::jpegtables`]), whole otherwise. An image is a JPEG of at most
+/// their Huffman tables where every image present has the standard ones, and also without
+/// their JFIF segment and quantisation tables where every image has the standard ones
+/// ([`super::jpegtables`]); whole otherwise. An image is a JPEG of at most
 /// [`super::atlas::MAX_SIDE`]² texels: far below 4 GiB.
 fn push_sections(blob: &mut Vec<u8>, image: Option<&[u8]>, normals: Option<&[u8]>) {
     let present = [image, normals];
-    let stripped = present.map(|i| i.and_then(jpegtables::strip_standard_huffman));
-    let strip = present.iter().any(Option::is_some)
-        && present
-            .iter()
-            .zip(&stripped)
-            .all(|(p, s)| p.is_none() || s.is_some());
-    blob[5] = if strip { BLOB_STANDARD_HUFFMAN } else { 0 };
+    let huffman = present.map(|i| i.and_then(jpegtables::strip_standard_huffman));
+    let headers = huffman
+        .each_ref()
+        .map(|i| i.as_deref().and_then(jpegtables::strip_headers));
+    let all = |stripped: &[Option<Vec<u8>>; 2]| {
+        present.iter().any(Option::is_some)
+            && present
+                .iter()
+                .zip(stripped)
+                .all(|(p, s)| p.is_none() || s.is_some())
+    };
+    let (flags, stripped) = if all(&headers) {
+        (
+            BLOB_STANDARD_HUFFMAN | BLOB_STANDARD_HEADERS,
+            Some(&headers),
+        )
+    } else if all(&huffman) {
+        (BLOB_STANDARD_HUFFMAN, Some(&huffman))
+    } else {
+        (0, None)
+    };
+    blob[5] = flags;
     for (k, flag) in [BLOB_IMAGE, BLOB_NORMALS].into_iter().enumerate() {
         if let Some(whole) = present[k] {
-            let bytes = match &stripped[k] {
-                Some(s) if strip => &s[..],
-                _ => whole,
+            let bytes = match stripped.and_then(|s| s[k].as_deref()) {
+                Some(s) => s,
+                None => whole,
             };
             blob[5] |= flag;
             blob.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
@@ -1025,6 +1045,20 @@ fn sections(blob: &[u8]) -> Result<Sections<'_>, CodecError> {
 /// Whether a blob's image sections are stored without their (standard) Huffman tables.
 pub fn images_without_tables(blob: &[u8]) -> bool {
     blob.get(5).is_some_and(|f| f & BLOB_STANDARD_HUFFMAN != 0)
+}
+
+/// Whether `blob`'s images are also stored without their JFIF segment and quantisation
+/// tables ([`jpegtables::strip_headers`]).
+pub fn images_without_headers(blob: &[u8]) -> bool {
+    blob.get(5).is_some_and(|f| f & BLOB_STANDARD_HEADERS != 0)
+}
+
+/// Bytes of `blob`'s image section as stored (0 where it has none).
+pub fn stored_image_len(blob: &[u8]) -> usize {
+    match blob.get(5) {
+        Some(f) if f & BLOB_IMAGE != 0 => u32_at(blob, 12).map_or(0, |l| l as usize),
+        _ => 0,
+    }
 }
 
 /// `blob` with its image sections holding `image` (the colour atlas) and `normals` (the normal
@@ -1212,12 +1246,18 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         payload,
         ..
     } = unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
-    // Images stored without their (standard) Huffman tables get them back.
+    // Images stored without their (standard) tables and headers get them back.
     let whole = |i: &[u8]| {
-        if images_without_tables(blob) {
-            jpegtables::with_standard_huffman(i)
+        let flags = blob.get(5).copied().unwrap_or(0);
+        let i = if flags & BLOB_STANDARD_HEADERS != 0 {
+            jpegtables::with_headers(i)
         } else {
             i.to_vec()
+        };
+        if flags & BLOB_STANDARD_HUFFMAN != 0 {
+            jpegtables::with_standard_huffman(&i)
+        } else {
+            i
         }
     };
     let image = image.map(whole);
@@ -1672,9 +1712,15 @@ mod tests {
         let jpeg = super::super::atlas::encode_jpeg(&texture, 85);
         let normal_jpeg = super::super::atlas::encode_normal_jpeg(&texture, 90);
         let real = with_images(&empty, Some(&jpeg), Some(&normal_jpeg)).expect("a blob");
-        assert_eq!(real[5], BLOB_IMAGE | BLOB_NORMALS | BLOB_STANDARD_HUFFMAN);
+        assert_eq!(
+            real[5],
+            BLOB_IMAGE | BLOB_NORMALS | BLOB_STANDARD_HUFFMAN | BLOB_STANDARD_HEADERS
+        );
         let (bytes, _) = blob_bytes(&real).expect("frames");
-        let tables = jpegtables::STANDARD_DHT.len();
+        assert_eq!(stored_image_len(&real), bytes.image);
+        // The Huffman tables, the JFIF segment and the quantisation tables, less the quality.
+        let tables =
+            jpegtables::STANDARD_DHT.len() + jpegtables::JFIF_APP0.len() + jpegtables::DQT_LEN - 1;
         assert_eq!(bytes.image + tables, jpeg.len());
         assert_eq!(bytes.normal_map + tables, normal_jpeg.len());
         let r = decode(&real, &grid).expect("decodes");

@@ -6,6 +6,12 @@
 //! segments and says so (blob flag bit 2, `docs/FORMAT.md`); a decoder puts
 //! [`STANDARD_DHT`] back right before the image's SOS marker, where the encoder wrote it,
 //! which gives back the image as encoded, byte for byte.
+//!
+//! The same holds for the rest of the header but the frame and scan headers: the JFIF APP0
+//! segment is the same in every image, and the quantisation tables are Annex K.1's scaled by
+//! the image's quality (the IJG formula the encoder uses), so a blob with flag bit 3 stores
+//! one byte, the quality, for those 156 ([`strip_headers`], [`with_headers`]): with the
+//! Huffman tables, 587 bytes of an image of a few kilobytes.
 
 /// The four DHT segments of Annex K.3 as the encoder writes them, in its order: DC luminance
 /// (class 0, table 0), AC luminance (class 1, table 0), DC chrominance (class 0, table 1), AC
@@ -39,6 +45,101 @@ pub const STANDARD_DHT: [u8; 432] = [
     0xc6, 0xc7, 0xc8, 0xc9, 0xca, 0xd2, 0xd3, 0xd4, 0xd5, 0xd6, 0xd7, 0xd8, 0xd9, 0xda, 0xe2, 0xe3,
     0xe4, 0xe5, 0xe6, 0xe7, 0xe8, 0xe9, 0xea, 0xf2, 0xf3, 0xf4, 0xf5, 0xf6, 0xf7, 0xf8, 0xf9, 0xfa,
 ];
+
+/// The JFIF APP0 segment the encoder writes in every image (version 1.2, no density units,
+/// 1:1, no thumbnail): blobs with flag bit 3 store their JPEGs without it ([`strip_headers`]).
+pub const JFIF_APP0: [u8; 18] = [
+    0xff, 0xe0, 0x00, 0x10, b'J', b'F', b'I', b'F', 0x00, 0x01, 0x02, 0x00, 0x00, 0x01, 0x00, 0x01,
+    0x00, 0x00,
+];
+
+/// The quantisation tables of ITU-T T.81 Annex K.1 (luminance, chrominance) in the zigzag
+/// order of a DQT segment: the values at quality 50, which the encoder scales.
+const ANNEX_K1: [[u8; 64]; 2] = [
+    [
+        16, 11, 12, 14, 12, 10, 16, 14, 13, 14, 18, 17, 16, 19, 24, 40, 26, 24, 22, 22, 24, 49, 35,
+        37, 29, 40, 58, 51, 61, 60, 57, 51, 56, 55, 64, 72, 92, 78, 64, 68, 87, 69, 55, 56, 80,
+        109, 81, 87, 95, 98, 103, 104, 103, 62, 77, 113, 121, 112, 100, 120, 92, 101, 103, 99,
+    ],
+    [
+        17, 18, 18, 24, 21, 24, 47, 26, 26, 47, 99, 66, 56, 66, 99, 99, 99, 99, 99, 99, 99, 99, 99,
+        99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99,
+        99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99, 99,
+    ],
+];
+
+/// Bytes of the two DQT segments of [`standard_dqt`].
+pub const DQT_LEN: usize = 2 * (5 + 64);
+
+/// The two DQT segments (luminance as table 0, chrominance as table 1) the encoder writes at
+/// `quality` (1–100): each Annex K.1 value `b` scaled as the IJG library does, `(b·s + 50) /
+/// 100` clamped to 1–255, with `s = 5000 / q` below quality 50 and `200 − 2q` from 50 on.
+pub fn standard_dqt(quality: u8) -> [u8; DQT_LEN] {
+    let q = u32::from(quality.clamp(1, 100));
+    let scale = if q < 50 { 5000 / q } else { 200 - 2 * q };
+    let mut out = [0u8; DQT_LEN];
+    for (t, table) in ANNEX_K1.iter().enumerate() {
+        let seg = &mut out[t * 69..(t + 1) * 69];
+        seg[..5].copy_from_slice(&[0xff, 0xdb, 0x00, 0x43, t as u8]);
+        for (o, &b) in seg[5..].iter_mut().zip(table) {
+            *o = ((u32::from(b) * scale + 50) / 100).clamp(1, 255) as u8;
+        }
+    }
+    out
+}
+
+/// `jpeg` (with or without its Huffman tables) without its JFIF APP0 segment and its
+/// quantisation tables, when they are exactly [`JFIF_APP0`] right after SOI and
+/// [`standard_dqt`] of some quality right after the frame header (SOF0), as the encoder
+/// writes them: one byte, the quality, then SOI and the rest. `None` otherwise (the image is
+/// then stored with them): 155 bytes less an image.
+pub fn strip_headers(jpeg: &[u8]) -> Option<Vec<u8>> {
+    if jpeg.get(..2)? != [0xFF, 0xD8] || jpeg.get(2..20)? != JFIF_APP0 {
+        return None;
+    }
+    if jpeg.get(20..22)? != [0xFF, 0xC0] {
+        return None;
+    }
+    let sof_end = 22 + usize::from(u16::from_be_bytes([*jpeg.get(22)?, *jpeg.get(23)?]));
+    let tables = jpeg.get(sof_end..sof_end + DQT_LEN)?;
+    let quality = (1..=100u8).find(|&q| standard_dqt(q)[..] == *tables)?;
+    Some(
+        [
+            &[quality][..],
+            &jpeg[..2],
+            &jpeg[20..sof_end],
+            &jpeg[sof_end + DQT_LEN..],
+        ]
+        .concat(),
+    )
+}
+
+/// An image stored by [`strip_headers`] made whole again: SOI, [`JFIF_APP0`], the frame
+/// header, [`standard_dqt`] of the stored quality, the rest (the bytes after the quality as
+/// they are where they do not start with SOI and a frame header, or the quality is not 1–100:
+/// a decoder then refuses them as it would have).
+pub fn with_headers(stripped: &[u8]) -> Vec<u8> {
+    let rest = stripped.get(1..).unwrap_or_default();
+    let whole = || -> Option<Vec<u8>> {
+        let quality = *stripped.first().filter(|q| (1..=100).contains(*q))?;
+        if rest.get(..4)? != [0xFF, 0xD8, 0xFF, 0xC0] {
+            return None;
+        }
+        let sof_end = 2 + 2 + usize::from(u16::from_be_bytes([*rest.get(4)?, *rest.get(5)?]));
+        rest.get(sof_end..)?;
+        Some(
+            [
+                &rest[..2],
+                &JFIF_APP0[..],
+                &rest[2..sof_end],
+                &standard_dqt(quality)[..],
+                &rest[sof_end..],
+            ]
+            .concat(),
+        )
+    };
+    whole().unwrap_or_else(|| rest.to_vec())
+}
 
 /// `jpeg` without its DHT segments, when they are exactly [`STANDARD_DHT`], right before its
 /// first scan header (SOS); `None` otherwise (the image is then stored whole).
@@ -177,5 +278,51 @@ mod tests {
         assert!(strip_standard_huffman(b"not a jpeg").is_none());
         assert!(strip_standard_huffman(&[0xFF, 0xD8, 0xFF]).is_none());
         assert_eq!(with_standard_huffman(b"xy"), b"xy");
+    }
+
+    #[test]
+    fn headers_strip_and_restore_exactly_at_every_quality() {
+        let texels: Vec<[u8; 4]> = (0..24 * 16)
+            .map(|i| [(i * 13 % 256) as u8, (i % 24 * 9) as u8, 40, 255])
+            .collect();
+        let image = Texture::from_texels(24, 16, texels).expect("an image");
+        let saved = JFIF_APP0.len() + DQT_LEN - 1;
+        for quality in 1..=100u8 {
+            for jpeg in [
+                encode_jpeg(&image, quality),
+                encode_normal_jpeg(&image, quality),
+            ] {
+                // Whole, and after the Huffman tables went: the quality is found, and the
+                // bytes come back as encoded.
+                let huffman = strip_standard_huffman(&jpeg).expect("standard tables");
+                for bytes in [&jpeg, &huffman] {
+                    let stripped = strip_headers(bytes).expect("standard headers");
+                    assert_eq!(stripped[0], quality);
+                    assert_eq!(stripped.len() + saved, bytes.len());
+                    assert_eq!(&with_headers(&stripped), bytes);
+                    assert!(strip_headers(&stripped[1..]).is_none());
+                }
+                let both = with_standard_huffman(&with_headers(
+                    &strip_headers(&huffman).expect("standard headers"),
+                ));
+                assert_eq!(both, jpeg);
+                assert!(Texture::decode(&both).is_ok());
+            }
+        }
+        // Tables other than the standard ones at some quality, or no JFIF segment: kept.
+        let jpeg = encode_jpeg(&image, 85);
+        let sof_end = 22 + usize::from(u16::from_be_bytes([jpeg[22], jpeg[23]]));
+        let mut other = jpeg.clone();
+        other[sof_end + 5 + 10] ^= 1;
+        assert!(strip_headers(&other).is_none());
+        let mut no_jfif = jpeg.clone();
+        no_jfif[6] = b'X';
+        assert!(strip_headers(&no_jfif).is_none());
+        assert!(strip_headers(b"not a jpeg").is_none());
+        assert!(strip_headers(&jpeg[..30]).is_none());
+        // What does not restore is given back as it is (the image decoder refuses it).
+        assert_eq!(with_headers(&[0, 0xFF, 0xD8]), [0xFF, 0xD8]);
+        assert_eq!(with_headers(&[85, 1, 2]), [1, 2]);
+        assert!(with_headers(&[]).is_empty());
     }
 }

@@ -40,6 +40,11 @@ const BLOB_IMAGE = 1;
 const BLOB_NORMALS = 2;
 /** Blob header flag (byte 5): the sections' JPEGs omit their (standard) Huffman tables. */
 const BLOB_STANDARD_HUFFMAN = 4;
+/**
+ * Blob header flag (byte 5), with BLOB_STANDARD_HUFFMAN: the sections' JPEGs also omit their JFIF
+ * APP0 segment and their (standard, scaled) quantisation tables; each starts with its quality.
+ */
+const BLOB_STANDARD_HEADERS = 8;
 
 /**
  * The standard Huffman tables of ITU-T T.81 Annex K.3 as four DHT segments (DC and AC
@@ -57,6 +62,60 @@ export const STANDARD_DHT = Uint8Array.from(
   '535455565758595a636465666768696a737475767778797a82838485868788898a92939495969798999aa2a3a4a5a6a7' +
   'a8a9aab2b3b4b5b6b7b8b9bac2c3c4c5c6c7c8c9cad2d3d4d5d6d7d8d9dae2e3e4e5e6e7e8e9eaf2f3f4f5f6f7f8f9fa').match(/../g).map((b) => parseInt(b, 16)),
 );
+
+/** The JFIF APP0 segment the engine's encoder writes (engine/src/lod/jpegtables.rs `JFIF_APP0`). */
+export const JFIF_APP0 = Uint8Array.from([
+  0xff, 0xe0, 0x00, 0x10, 0x4a, 0x46, 0x49, 0x46, 0x00, 0x01, 0x02, 0x00, 0x00, 0x01, 0x00, 0x01, 0x00, 0x00,
+]);
+
+/** ITU-T T.81 Annex K.1's quantisation tables (luminance, chrominance) in a DQT's zigzag order. */
+const ANNEX_K1 = [
+  [16, 11, 12, 14, 12, 10, 16, 14, 13, 14, 18, 17, 16, 19, 24, 40, 26, 24, 22, 22, 24, 49,
+    35, 37, 29, 40, 58, 51, 61, 60, 57, 51, 56, 55, 64, 72, 92, 78, 64, 68, 87, 69, 55, 56,
+    80, 109, 81, 87, 95, 98, 103, 104, 103, 62, 77, 113, 121, 112, 100, 120, 92, 101, 103, 99],
+  [17, 18, 18, 24, 21, 24, 47, 26, 26, 47, 99, 66, 56, 66, ...new Array(50).fill(99)],
+];
+
+/**
+ * The two DQT segments the engine's encoder writes at `quality` (1–100): Annex K.1 scaled as
+ * the IJG library does (engine/src/lod/jpegtables.rs `standard_dqt`, docs/FORMAT.md).
+ */
+export function standardDqt(quality) {
+  const q = Math.min(100, Math.max(1, quality));
+  const scale = q < 50 ? Math.floor(5000 / q) : 200 - 2 * q;
+  const out = new Uint8Array(2 * 69);
+  ANNEX_K1.forEach((table, t) => {
+    out.set([0xff, 0xdb, 0x00, 0x43, t], t * 69);
+    table.forEach((b, i) => {
+      out[t * 69 + 5 + i] = Math.min(255, Math.max(1, Math.floor((b * scale + 50) / 100)));
+    });
+  });
+  return out;
+}
+
+/**
+ * A JPEG stored without its JFIF segment and quantisation tables made whole: its first byte is
+ * the quality; SOI, JFIF_APP0, the frame header, standardDqt(quality), then the rest (the bytes
+ * after the quality as they are where that does not fit: the image decoder then refuses them).
+ */
+export function withStandardHeaders(stored) {
+  const rest = stored.subarray(1);
+  const quality = stored[0];
+  if (!(quality >= 1 && quality <= 100) || rest.length < 6
+    || rest[0] !== 0xff || rest[1] !== 0xd8 || rest[2] !== 0xff || rest[3] !== 0xc0) {
+    return rest.slice();
+  }
+  const sofEnd = 4 + ((rest[4] << 8) | rest[5]);
+  if (sofEnd > rest.length) return rest.slice();
+  const dqt = standardDqt(quality);
+  const out = new Uint8Array(rest.length + JFIF_APP0.length + dqt.length);
+  out.set(rest.subarray(0, 2));
+  out.set(JFIF_APP0, 2);
+  out.set(rest.subarray(2, sofEnd), 2 + JFIF_APP0.length);
+  out.set(dqt, sofEnd + JFIF_APP0.length);
+  out.set(rest.subarray(sofEnd), sofEnd + JFIF_APP0.length + dqt.length);
+  return out;
+}
 
 /**
  * A JPEG stored without its Huffman tables made whole: STANDARD_DHT right before its first
@@ -649,7 +708,11 @@ export function decodePatch(blob, grid, deps) {
     body = end;
     return bytes;
   };
-  const whole = (bytes) => (bytes && blob[5] & BLOB_STANDARD_HUFFMAN ? withStandardHuffman(bytes) : bytes);
+  const whole = (bytes) => {
+    if (!bytes) return bytes;
+    const headed = blob[5] & BLOB_STANDARD_HEADERS ? withStandardHeaders(bytes) : bytes;
+    return blob[5] & BLOB_STANDARD_HUFFMAN ? withStandardHuffman(headed) : headed;
+  };
   const image = whole(section(BLOB_IMAGE));
   const normalMap = whole(section(BLOB_NORMALS));
   let payload;
