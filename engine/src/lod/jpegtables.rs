@@ -68,8 +68,11 @@ const ANNEX_K1: [[u8; 64]; 2] = [
     ],
 ];
 
+/// Bytes of one DQT segment of [`standard_dqt`]: marker, length, table id, 64 values.
+const DQT_SEGMENT: usize = 5 + 64;
+
 /// Bytes of the two DQT segments of [`standard_dqt`].
-pub const DQT_LEN: usize = 2 * (5 + 64);
+pub const DQT_LEN: usize = 2 * DQT_SEGMENT;
 
 /// The two DQT segments (luminance as table 0, chrominance as table 1) the encoder writes at
 /// `quality` (1–100): each Annex K.1 value `b` scaled as the IJG library does, `(b·s + 50) /
@@ -79,7 +82,7 @@ pub fn standard_dqt(quality: u8) -> [u8; DQT_LEN] {
     let scale = if q < 50 { 5000 / q } else { 200 - 2 * q };
     let mut out = [0u8; DQT_LEN];
     for (t, table) in ANNEX_K1.iter().enumerate() {
-        let seg = &mut out[t * 69..(t + 1) * 69];
+        let seg = &mut out[t * DQT_SEGMENT..(t + 1) * DQT_SEGMENT];
         seg[..5].copy_from_slice(&[0xff, 0xdb, 0x00, 0x43, t as u8]);
         for (o, &b) in seg[5..].iter_mut().zip(table) {
             *o = ((u32::from(b) * scale + 50) / 100).clamp(1, 255) as u8;

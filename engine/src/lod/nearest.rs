@@ -25,15 +25,14 @@ struct Node {
 
 /// A BVH over triangles given as corner positions.
 pub struct Nearest {
-    tris: Vec<[Vec3; 3]>,
-    normals: Vec<Vec3>,
     /// The triangles in leaf order (a leaf's are side by side), each with its box: a leaf's
     /// triangles farther than the best so far by their boxes skip the exact test.
     slots: Vec<Slot>,
     nodes: Vec<Node>,
     /// Each node's parent (the root's is itself), for walks that start at a leaf.
     parent: Vec<u32>,
-    /// The leaf holding each triangle.
+    /// Per triangle (as given to [`Nearest::new`]): its slot and the leaf holding it.
+    slot_of: Vec<u32>,
     leaf_of: Vec<u32>,
 }
 
@@ -59,7 +58,8 @@ pub struct Hit {
 impl Nearest {
     /// Corner positions of triangle `t` (as given to [`Nearest::new`]).
     pub fn triangle(&self, t: u32) -> Option<&[Vec3; 3]> {
-        self.tris.get(t as usize)
+        let slot = *self.slot_of.get(t as usize)?;
+        Some(&self.slots[slot as usize].corners)
     }
 
     pub fn new(tris: Vec<[Vec3; 3]>) -> Nearest {
@@ -91,6 +91,10 @@ impl Nearest {
                 parent[node.right as usize] = i as u32;
             }
         }
+        let mut slot_of = vec![0u32; tris.len()];
+        for (i, &t) in order.iter().enumerate() {
+            slot_of[t as usize] = i as u32;
+        }
         let slots = order
             .iter()
             .map(|&t| Slot {
@@ -102,11 +106,10 @@ impl Nearest {
             })
             .collect();
         Nearest {
-            tris,
-            normals,
             slots,
             nodes,
             parent,
+            slot_of,
             leaf_of,
         }
     }
@@ -138,8 +141,9 @@ impl Nearest {
             d: f32::INFINITY,
         };
         let hint = hint.filter(|&t| {
-            (t as usize) < self.tris.len()
-                && (!filter || self.normals[t as usize].dot(facing) >= min_dot)
+            self.slot_of
+                .get(t as usize)
+                .is_some_and(|&s| !filter || self.slots[s as usize].normal.dot(facing) >= min_dot)
         });
         let Some(t) = hint else {
             if !self.nodes.is_empty() {
@@ -147,7 +151,8 @@ impl Nearest {
             }
             return best.hit;
         };
-        self.consider(t, p, &mut best);
+        let slot = &self.slots[self.slot_of[t as usize] as usize];
+        self.consider(slot, p, &mut best);
         let mut node = self.leaf_of[t as usize];
         self.descend(node, p, facing, min_dot, &mut best);
         while node != 0 {
@@ -167,21 +172,15 @@ impl Nearest {
         best.hit
     }
 
-    /// Tests triangle `t`, keeping it where it is nearer than the best so far.
+    /// Tests the triangle in `slot`, keeping it where it is nearer than the best so far.
     #[inline]
-    fn consider(&self, t: u32, p: Vec3, best: &mut Best) {
-        self.consider_corners(t, &self.tris[t as usize], p, best);
-    }
-
-    /// [`Self::consider`] with the triangle's corners at hand.
-    #[inline]
-    fn consider_corners(&self, t: u32, corners: &[Vec3; 3], p: Vec3, best: &mut Best) {
-        let (q, bary) = closest_on_triangle(p, corners);
+    fn consider(&self, slot: &Slot, p: Vec3, best: &mut Best) {
+        let (q, bary) = closest_on_triangle(p, &slot.corners);
         let d = (q - p).length_squared();
         if d < best.d {
             best.d = d;
             best.hit = Some(Hit {
-                triangle: t,
+                triangle: slot.id,
                 bary,
                 distance_sq: d,
             });
@@ -209,7 +208,7 @@ impl Nearest {
                     {
                         continue;
                     }
-                    self.consider_corners(slot.id, &slot.corners, p, best);
+                    self.consider(slot, p, best);
                 }
                 continue;
             }
@@ -373,7 +372,9 @@ mod tests {
             // A hint facing the wrong way is not taken.
             let up = bvh.closest_near(p, Vec3::Z, 0.5, Some(hit.triangle));
             if let Some(up) = up {
-                assert!(bvh.normals[up.triangle as usize].z >= 0.5);
+                let t = bvh.triangle(up.triangle).expect("a triangle");
+                assert!((t[1] - t[0]).cross(t[2] - t[0]).normalize().z >= 0.5);
+                assert_eq!(t, &tris[up.triangle as usize]);
             }
         }
     }

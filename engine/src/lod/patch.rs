@@ -126,17 +126,24 @@ pub fn edge_runs(indices: &[u32], n: usize, skip_degenerate: bool) -> Vec<(u64, 
     out
 }
 
+/// The corner after corner `c` in its triangle (corners `3f`, `3f + 1`, `3f + 2`).
+#[inline]
+pub fn next_corner(c: usize) -> usize {
+    c - c % 3 + (c + 1) % 3
+}
+
 /// Every corner `c` of the triangles of `indices` kept by `keep` (corners below `n`) with the
 /// key ([`edge_key`]) of its edge, from `indices[c]` to the next corner of its triangle,
 /// sorted by key and then by corner: what sorting all `(key, corner)` pairs gives, by a
 /// counting sort on the lower end and a small sort of each vertex's few edges, as in
-/// [`edge_runs`]. Runs of equal keys are the triangles that share an edge.
+/// [`edge_runs`]. Runs of equal keys are the triangles that share an edge. (`edge_runs` keeps
+/// its own loop: built on this one, with a sort pass apart from its counting, it took a fifth
+/// longer, and it is 6% of a build.)
 pub fn edge_corners(indices: &[u32], n: usize, keep: impl Fn(usize) -> bool) -> Vec<(u64, u32)> {
-    let next = |c: usize| c - c % 3 + (c + 1) % 3;
     let kept = || (0..indices.len() - indices.len() % 3).filter(|&c| keep(c / 3));
     let mut start = vec![0u32; n + 1];
     for c in kept() {
-        start[indices[c].min(indices[next(c)]) as usize + 1] += 1;
+        start[indices[c].min(indices[next_corner(c)]) as usize + 1] += 1;
     }
     for v in 0..n {
         start[v + 1] += start[v];
@@ -144,7 +151,7 @@ pub fn edge_corners(indices: &[u32], n: usize, keep: impl Fn(usize) -> bool) -> 
     let mut fill = start.clone();
     let mut out = vec![(0u64, 0u32); start[n] as usize];
     for c in kept() {
-        let key = edge_key(indices[c], indices[next(c)]);
+        let key = edge_key(indices[c], indices[next_corner(c)]);
         let slot = &mut fill[(key >> 32) as usize];
         out[*slot as usize] = (key, c as u32);
         *slot += 1;

@@ -27,7 +27,7 @@
 use glam::{Vec2, Vec3};
 
 use super::atlas::{self, BLOCK, GUTTER, Layout, MAX_SIDE, MAX_TEXELS, shelf_pack};
-use super::patch::{edge_corners, edge_ends, find_root};
+use super::patch::{edge_corners, edge_ends, find_root, next_corner};
 
 /// A triangle whose projected area over its area is below the patch's mean over this much
 /// (about 86° from the plane on a flat patch) is charted afresh.
@@ -101,9 +101,13 @@ pub fn layout(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Optio
         .collect();
     // Plane units to texels: as many texels as the surface has at `texel_size`.
     let scale = 1.0 / (texel_size * ratio.sqrt());
+    // Every edge by its vertex pair (runs of equal keys share an edge): the same in every
+    // round, for the pieces and for the border.
+    let edges = edge_corners(indices, positions.len(), |_| true);
     for _ in 0..ROUNDS {
-        let layout = with_fresh(positions, indices, &bad, |i| plane(i) * scale, texel_size)?;
-        let Some(rows) = overlap_rows(&layout, indices, positions.len(), &bad) else {
+        let at = |i| plane(i) * scale;
+        let layout = with_fresh(positions, indices, &edges, &bad, at, texel_size)?;
+        let Some(rows) = overlap_rows(&layout, indices, &edges, &bad) else {
             return Some(layout);
         };
         let clashes = overlapping_triangles(&layout, &bad, &rows);
@@ -122,6 +126,7 @@ pub fn layout(positions: &[[f32; 3]], indices: &[u32], texel_size: f32) -> Optio
 fn with_fresh(
     positions: &[[f32; 3]],
     indices: &[u32],
+    edges: &[(u64, u32)],
     bad: &[bool],
     at: impl Fn(u32) -> Vec2,
     texel_size: f32,
@@ -159,7 +164,7 @@ fn with_fresh(
             }
         }
     }
-    pack(indices, positions.len(), bad, &texel, texel_size)
+    pack(indices, edges, bad, &texel, texel_size)
 }
 
 /// Packs the triangles at their corners' texel coordinates `texel`: each connected piece
@@ -167,12 +172,12 @@ fn with_fresh(
 /// planar or `fresh` alike) gets its rectangle, a gutter wide and whole blocks large.
 fn pack(
     indices: &[u32],
-    vertices: usize,
+    edges: &[(u64, u32)],
     fresh: &[bool],
     texel: &[Vec2],
     texel_size: f32,
 ) -> Option<Layout> {
-    let piece = pieces(indices, vertices, fresh, texel);
+    let piece = pieces(indices, edges, fresh, texel);
     let count = piece.iter().map(|&p| p as usize + 1).max().unwrap_or(0);
     let mut bounds = vec![(Vec2::splat(f32::MAX), Vec2::splat(f32::MIN)); count];
     for (f, &p) in piece.iter().enumerate() {
@@ -226,11 +231,10 @@ fn pack(
     })
 }
 
-/// Each triangle's connected piece (see [`pack`]).
-fn pieces(indices: &[u32], vertices: usize, fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
+/// Each triangle's connected piece (see [`pack`]); `edges` are the triangles' edges by
+/// [`edge_corners`].
+fn pieces(indices: &[u32], edges: &[(u64, u32)], fresh: &[bool], texel: &[Vec2]) -> Vec<u32> {
     let t = fresh.len();
-    // Every triangle edge by its vertex pair; runs of equal keys share an edge.
-    let edges = edge_corners(indices, vertices, |_| true);
     let mut parent: Vec<u32> = (0..t as u32).collect();
     // The texel coordinate of vertex `v` in the triangle of corner `c`.
     let at = |c: usize, v: u32| -> Vec2 {
@@ -285,23 +289,24 @@ fn pieces(indices: &[u32], vertices: usize, fresh: &[bool], texel: &[Vec2]) -> V
 fn overlap_rows(
     layout: &Layout,
     indices: &[u32],
-    vertices: usize,
+    edges: &[(u64, u32)],
     skip: &[bool],
 ) -> Option<Vec<(f32, f32)>> {
     const EMPTY: (f32, f32) = (f32::INFINITY, f32::NEG_INFINITY);
     let h = layout.height as usize;
     let everywhere = || Some(vec![(f32::NEG_INFINITY, f32::INFINITY); h]);
-    let next = |c: usize| c - c % 3 + (c + 1) % 3;
-    let edges = edge_corners(indices, vertices, |f| {
-        !skip.get(f).copied().unwrap_or(false)
-    });
     // (row, x, ±1) where a border edge crosses the row's centre line.
     let mut crossings: Vec<(u32, f32, i32)> = Vec::new();
     for run in edges.chunk_by(|a, b| a.0 == b.0) {
-        match *run {
-            [(_, c)] => {
-                let c = c as usize;
-                let (p, q) = (layout.corners[c], layout.corners[next(c)]);
+        // The corners on this edge of the triangles kept.
+        let mut kept = run
+            .iter()
+            .map(|&(_, c)| c as usize)
+            .filter(|&c| !skip.get(c / 3).copied().unwrap_or(false));
+        match (kept.next(), kept.next(), kept.next()) {
+            (None, ..) => {}
+            (Some(c), None, _) => {
+                let (p, q) = (layout.corners[c], layout.corners[next_corner(c)]);
                 // Endpoints in y order, so an edge's crossings do not depend on its direction.
                 let (lo, hi, sign) = if p.y <= q.y { (p, q, 1) } else { (q, p, -1) };
                 // Rows whose centre y + 0.5 has lo.y <= y + 0.5 < hi.y, within the layout.
@@ -317,7 +322,7 @@ fn overlap_rows(
                 }
             }
             // Two triangles on one edge must run it opposite ways.
-            [(_, a), (_, b)] if indices[a as usize] == indices[next(b as usize)] => {}
+            (Some(a), Some(b), None) if indices[a] == indices[next_corner(b)] => {}
             _ => return everywhere(),
         }
     }
@@ -483,7 +488,8 @@ mod tests {
                 };
                 let everywhere = vec![(f32::NEG_INFINITY, f32::INFINITY); 80];
                 let all = overlapping_triangles(&l, &skip, &everywhere);
-                match overlap_rows(&l, &indices, texel.len(), &skip) {
+                let edges = edge_corners(&indices, texel.len(), |_| true);
+                match overlap_rows(&l, &indices, &edges, &skip) {
                     None => {
                         assert!(all.is_empty(), "shake {shake}: clashes {all:?} unflagged");
                         clean += 1;

@@ -543,7 +543,7 @@ pub fn split_tracked(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lod::patch::edge_corners;
+    use crate::lod::patch::{edge_corners, next_corner};
 
     fn sheet(n: u32, id_base: u32, x0: f32) -> BuildPatch {
         let mut p = BuildPatch::default();
@@ -640,12 +640,7 @@ mod tests {
             let keep = |f: usize| !(skip && degenerate(&indices[3 * f..3 * f + 3]));
             let mut pairs: Vec<(u64, u32)> = (0..indices.len())
                 .filter(|&c| keep(c / 3))
-                .map(|c| {
-                    (
-                        edge_key(indices[c], indices[c - c % 3 + (c + 1) % 3]),
-                        c as u32,
-                    )
-                })
+                .map(|c| (edge_key(indices[c], indices[next_corner(c)]), c as u32))
                 .collect();
             pairs.sort_unstable();
             assert_eq!(edge_corners(&indices, n, keep), pairs);
