@@ -53,7 +53,7 @@ fn api_of(
     };
     let pixels_only = || {
         with(
-            serde_json::json!({"w_seg": 0.0, "w_seg_out": 0.0, "w_seg_apart": 0.0, "seg_edge": 1.0}),
+            serde_json::json!({"w_seg": 0.0, "w_seg_out": 0.0, "w_seg_apart": 0.0, "w_seg_far": 0.0, "seg_edge": 1.0}),
         )
     };
     match name {

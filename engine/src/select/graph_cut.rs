@@ -17,6 +17,10 @@ use super::energy::{DataTerm, EnergyParams, SeedModel, Smoothness};
 use super::maxflow_grid::{GridEdges, GridGraph};
 use super::seeds::{BG, FG, OFF, Seeds, UNKNOWN};
 
+/// Most claim radii beyond [`EnergyParams::seg_far`] that count in the far-from-strokes
+/// lean: a pixel that far is as surely apart as any farther one.
+pub const FAR_CAP: f32 = 4.0;
+
 /// Capacity of a hard constraint (the "∞" of eq. 3): far above any sum of soft costs.
 pub const HARD: f32 = 1e9;
 
@@ -141,6 +145,15 @@ pub fn graph_cut_with(
                             -1 => cf += params.w_seg,
                             _ if seeds.stroke_position.is_some() => {
                                 cf += params.w_seg_out;
+                                let radius = params.seg_far * p.fg_radius;
+                                if let Some(d) = &seeds.stroke_distance
+                                    && params.w_seg_far > 0.0
+                                    && radius > 0.0
+                                {
+                                    // Claim radii beyond `seg_far` to the nearest stroke.
+                                    let t = d[g] / radius - 1.0;
+                                    cf += params.w_seg_far * t.clamp(0.0, FAR_CAP);
+                                }
                                 if p.apart[g] {
                                     cf += params.w_seg_apart;
                                 }
@@ -330,5 +343,68 @@ mod tests {
             }
         }
         assert!(sel[5 * w as usize + 3]);
+    }
+
+    /// Markup's far-from-strokes lean ([`EnergyParams::w_seg_far`]): a foreground stroke at
+    /// one end of a long flat strip and a background stroke at the other, each claiming the
+    /// few columns around it. Without the lean the cut falls where the stroke distances
+    /// balance; with it the stroke-free middle, far from both, goes to the background, and only
+    /// pixels farther than `seg_far` claim radii from every stroke change side.
+    #[test]
+    fn surface_far_from_every_stroke_leans_to_the_background() {
+        use crate::select::segments::SegmentPrior;
+        let (w, h) = (100usize, 20usize);
+        let b = OwnedBuffers::flat(w as u32, h as u32);
+        let v = b.view();
+        let mut m = StrokeMask::empty(w as u32, h as u32).unwrap();
+        for y in 8..12 {
+            m.labels[y * w + 2] = mask::FOREGROUND;
+            m.labels[y * w + w - 3] = mask::BACKGROUND;
+        }
+        let mut s = seeds::markup(&m, &v).unwrap();
+        let claim = 6;
+        let column = |i: usize| match i % w {
+            x if x < claim => 0,
+            x if x >= w - claim => 1,
+            _ => 2,
+        };
+        let n = w * h;
+        s.segments = Some(SegmentPrior {
+            side: (0..n).map(|i| [1, -1, 0][column(i)]).collect(),
+            region: (0..n).map(|i| column(i) as u64).collect(),
+            apart: vec![false; n],
+            fg_radius: ((claim * h) as f32).sqrt(),
+        });
+        let select = |w_seg_far: f32| {
+            let params = EnergyParams {
+                w_seg_far,
+                ..EnergyParams::default()
+            };
+            let (mut sel, _) = graph_cut(&v, &s, &params, false).unwrap();
+            keep_connected_to_seeds(&mut sel, &s);
+            sel
+        };
+        let defaults = EnergyParams::default();
+        assert!(defaults.w_seg_far > 0.0);
+        let (without, with) = (select(0.0), select(defaults.w_seg_far));
+        let count = |sel: &[bool]| sel.iter().filter(|&&x| x).count();
+        assert!(
+            count(&with) + 2 * h <= count(&without),
+            "{} vs {}",
+            count(&with),
+            count(&without)
+        );
+        let radius = defaults.seg_far * ((claim * h) as f32).sqrt();
+        let distance = s.stroke_distance.as_ref().unwrap();
+        for i in 0..n {
+            assert!(!with[i] || without[i], "pixel {i} gained");
+            if without[i] && !with[i] {
+                assert!(
+                    distance[i] > radius,
+                    "pixel {i}: {} <= {radius}",
+                    distance[i]
+                );
+            }
+        }
     }
 }

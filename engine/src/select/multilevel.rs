@@ -132,6 +132,7 @@ struct Coarse {
     near_selected: Vec<bool>,
     near_unselected: Vec<bool>,
     stroke_position: Option<Vec<f32>>,
+    stroke_distance: Option<Vec<f32>>,
     claims: Option<StrokeClaims>,
     models: (SeedModel, SeedModel),
     stats: CutStats,
@@ -168,6 +169,7 @@ fn coarse_cut(
         near_selected: near(&selected, true, w, h, BAND),
         near_unselected: near(&selected, false, w, h, BAND),
         stroke_position: s.stroke_position.take(),
+        stroke_distance: s.stroke_distance.take(),
         claims,
         models,
         stats,
@@ -248,6 +250,10 @@ impl Coarse {
             bg_samples: bg,
             band_position: None,
             stroke_position,
+            stroke_distance: self
+                .stroke_distance
+                .as_ref()
+                .map(|coarse| (0..n).map(|i| coarse[coarse_of(i)]).collect()),
             segments: None,
         };
         if let (Some(file), Some(claims)) = (segments, &self.claims) {

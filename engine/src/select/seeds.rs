@@ -49,6 +49,9 @@ pub struct Seeds {
     /// Markup: relative geodesic distance to the strokes per pixel, `D^F / (D^F + D^B)`
     /// (0 on a foreground stroke … 1 on a background stroke; see [`geodesic_from`]).
     pub stroke_position: Option<Vec<f32>>,
+    /// Markup: geodesic distance to the nearest stroke of either side per pixel,
+    /// `min(D^F, D^B)` (see [`geodesic_from`]).
+    pub stroke_distance: Option<Vec<f32>>,
     /// The stroke segments, when the model has surface segments ([`super::segments`]).
     pub segments: Option<super::segments::SegmentPrior>,
 }
@@ -397,22 +400,21 @@ pub fn markup(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, SelectE
             "markup needs background strokes (label 2) on the surface around the region".into()
         }));
     }
+    let costs = StepCosts::new(buffers);
+    // The two searches are independent: one per core.
+    let (d_fg, d_bg) = rayon::join(
+        || geodesic_from(&costs, buffers, &fg),
+        || geodesic_from(&costs, buffers, &bg),
+    );
     Ok(Seeds {
         width: buffers.width,
         height: buffers.height,
         role,
-        stroke_position: Some({
-            let costs = StepCosts::new(buffers);
-            // The two searches are independent: one per core.
-            let (d_fg, d_bg) = rayon::join(
-                || geodesic_from(&costs, buffers, &fg),
-                || geodesic_from(&costs, buffers, &bg),
-            );
-            relative_distance(&d_fg, &d_bg)
-        }),
+        stroke_position: Some(relative_distance(&d_fg, &d_bg)),
         fg_samples: fg,
         bg_samples: bg,
         band_position: None,
+        stroke_distance: Some(d_fg.iter().zip(&d_bg).map(|(&f, &b)| f.min(b)).collect()),
         segments: None,
     })
 }
@@ -600,6 +602,7 @@ pub fn heavy_lasso(mask: &StrokeMask, buffers: &Buffers<'_>) -> Result<Seeds, Se
         bg_samples: bg,
         band_position: Some(position),
         stroke_position: None,
+        stroke_distance: None,
         segments: None,
     })
 }

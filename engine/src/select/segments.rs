@@ -11,7 +11,7 @@
 //! at least half as strong as the strongest — not simply the largest, which with few
 //! strokes would be half the model, nor strictly the strongest, which took a piece of a
 //! part whenever noise made its boundary a little stronger than the part's. Segments no
-//! stroke claims stay undecided. These *stroke segments* act on the cut in two ways:
+//! stroke claims stay undecided. These *stroke segments* act on the cut in four ways:
 //!
 //! - a **segment prior** in the data term: a pixel in a foreground stroke segment costs
 //!   `w_seg` more to put in the background, and the converse — so a stroke claims the
@@ -30,6 +30,13 @@
 //!   claimed part, as a rule) still go to the nearer side. The rule errs where a short
 //!   stroke claims a small piece of a large smooth part: the rest of that part then counts
 //!   as apart too (`meshwiki-bench select --sweep`, setting 5, measures it).
+//! - for markup, **surface far from every stroke**: an unclaimed pixel whose geodesic
+//!   distance to the nearest stroke, of either side, exceeds `seg_far` claim radii (`√` of
+//!   the pixels the foreground strokes claim) leans to the background by `w_seg_far` per
+//!   radius beyond. With one background stroke, the relative stroke distance gave the
+//!   foreground everything nearer its strokes than that one stroke — half a model for two
+//!   strokes on an arm; the apart rule only catches it where the stroke-free surface forms
+//!   one segment larger than the claims.
 //!
 //! The seeds' foreground and background pixels are the strokes: markup's strokes, and the
 //! heavy lasso's inner and outer sides.
@@ -108,6 +115,9 @@ pub struct SegmentPrior {
     /// Per pixel: in no claimed segment, and in a stroke-free segment that shows more pixels
     /// than the foreground claims ([`StrokeClaims::of`]).
     pub apart: Vec<bool>,
+    /// `√` of the pixels the foreground strokes claim (0 when they claim none), in the
+    /// pixels of the level the claims were made on.
+    pub fg_radius: f32,
 }
 
 /// What the strokes claim (the first half of [`stroke_segments`]): per `scale << 32 | segment`
@@ -122,6 +132,8 @@ pub struct StrokeClaims {
     /// Stroke-free segments showing more pixels than the foreground claims (none when the
     /// foreground strokes claim nothing).
     apart: rustc_hash::FxHashSet<u64>,
+    /// Pixels the foreground strokes claim.
+    claimed_fg: u64,
 }
 
 fn key(s: usize, seg: u32) -> u64 {
@@ -192,6 +204,7 @@ impl StrokeClaims {
             claimed,
             touched: count.into_keys().collect(),
             apart: Default::default(),
+            claimed_fg: 0,
         };
         // Pixels per local fine segment, then per decision.
         let mut pixels = vec![0u64; view.ladders.len()];
@@ -209,6 +222,7 @@ impl StrokeClaims {
                 _ => {}
             }
         }
+        claims.claimed_fg = claimed_fg;
         claims.apart = free
             .into_iter()
             .filter(|&(_, n)| claimed_fg > 0 && n > claimed_fg)
@@ -262,6 +276,7 @@ impl StrokeClaims {
             side,
             region,
             apart,
+            fg_radius: (self.claimed_fg as f32).sqrt(),
         }
     }
 }
@@ -332,6 +347,7 @@ mod tests {
             bg_samples: Vec::new(),
             band_position: None,
             stroke_position: None,
+            stroke_distance: None,
             segments: None,
         }
     }
