@@ -1248,13 +1248,12 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
     } = unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
     // Images stored without their (standard) tables and headers get them back.
     let whole = |i: &[u8]| {
-        let flags = blob.get(5).copied().unwrap_or(0);
-        let i = if flags & BLOB_STANDARD_HEADERS != 0 {
+        let i = if images_without_headers(blob) {
             jpegtables::with_headers(i)
         } else {
             i.to_vec()
         };
-        if flags & BLOB_STANDARD_HUFFMAN != 0 {
+        if images_without_tables(blob) {
             jpegtables::with_standard_huffman(&i)
         } else {
             i

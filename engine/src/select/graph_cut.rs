@@ -369,11 +369,12 @@ mod tests {
             _ => 2,
         };
         let n = w * h;
+        let fg_radius = ((claim * h) as f32).sqrt();
         s.segments = Some(SegmentPrior {
             side: (0..n).map(|i| [1, -1, 0][column(i)]).collect(),
             region: (0..n).map(|i| column(i) as u64).collect(),
             apart: vec![false; n],
-            fg_radius: ((claim * h) as f32).sqrt(),
+            fg_radius,
         });
         let select = |w_seg_far: f32| {
             let params = EnergyParams {
@@ -394,7 +395,7 @@ mod tests {
             count(&with),
             count(&without)
         );
-        let radius = defaults.seg_far * ((claim * h) as f32).sqrt();
+        let radius = defaults.seg_far * fg_radius;
         let distance = s.stroke_distance.as_ref().unwrap();
         for i in 0..n {
             assert!(!with[i] || without[i], "pixel {i} gained");

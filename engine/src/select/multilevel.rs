@@ -238,10 +238,12 @@ impl Coarse {
                 }
             };
         }
-        let stroke_position = self
-            .stroke_position
-            .as_ref()
-            .map(|coarse| (0..n).map(|i| coarse[coarse_of(i)]).collect());
+        // A coarse per-pixel field read at each full-resolution pixel.
+        let upsample = |coarse: &Option<Vec<f32>>| {
+            coarse
+                .as_ref()
+                .map(|c| (0..n).map(|i| c[coarse_of(i)]).collect())
+        };
         let mut s = Seeds {
             width: buffers.width,
             height: buffers.height,
@@ -249,11 +251,8 @@ impl Coarse {
             fg_samples: fg,
             bg_samples: bg,
             band_position: None,
-            stroke_position,
-            stroke_distance: self
-                .stroke_distance
-                .as_ref()
-                .map(|coarse| (0..n).map(|i| coarse[coarse_of(i)]).collect()),
+            stroke_position: upsample(&self.stroke_position),
+            stroke_distance: upsample(&self.stroke_distance),
             segments: None,
         };
         if let (Some(file), Some(claims)) = (segments, &self.claims) {
