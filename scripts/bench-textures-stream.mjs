@@ -124,7 +124,7 @@ async function main() {
       const leaves = await leafVertices(join(server.dataDir, model.lod_path));
       const p = regionAt(leaves, [0, 0, 1], [0, 0, 0], 0.01).seed;
       const path = cameraPath(leaves.table.center, leaves.table.radius, p);
-      const atlases = report?.textures ? report.textures.featured.jpeg_bytes + report.textures.plain.jpeg_bytes : 0;
+      const atlases = report?.textures ? report.textures.featured.image_bytes + report.textures.plain.image_bytes : 0;
       results.push({ spread, rows: await run(server, model, path), atlases, file: leaves.table.fileBytes });
     }
     for (const r of results) {

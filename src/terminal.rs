@@ -111,7 +111,7 @@ pub fn print_summary(report: &BuildReport) {
             "  atlases      {} JPEGs, {:.2} MB for {:.1} M texels, quality {}–{} (mean {:.1}; \
              {} of them richer in features than their level's mean)",
             all.fragments,
-            mb(all.jpeg_bytes),
+            mb(all.image_bytes),
             all.covered_texels as f64 / 1e6,
             t.quality.0,
             t.quality.2,

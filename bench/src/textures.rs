@@ -26,8 +26,9 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
 use meshwiki_engine::lod::VertexOrder;
-use meshwiki_engine::lod::atlas::encode_jpeg;
+use meshwiki_engine::lod::atlas::{AtlasCodec, encode_jpeg};
 use meshwiki_engine::lod::build::{BuildOptions, BuildReport, TextureBytes, TextureReport};
+use meshwiki_engine::lod::webp_match;
 use meshwiki_engine::mesh::{self, MeshSink, Relief};
 use meshwiki_engine::progress::NoProgress;
 
@@ -294,9 +295,9 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
         println!(
             "  atlases: {:.2} MB for {:.1} M covered texels = {:.3} bytes a texel; the source \
              texture as one JPEG q{}: {:.2} MB for {:.1} M texels = {:.3} bytes a texel",
-            all.jpeg_bytes as f64 / 1e6,
+            all.image_bytes as f64 / 1e6,
             all.covered_texels as f64 / 1e6,
-            all.jpeg_bytes as f64 / all.covered_texels.max(1) as f64,
+            all.image_bytes as f64 / all.covered_texels.max(1) as f64,
             args.quality,
             jpeg as f64 / 1e6,
             texels as f64 / 1e6,
@@ -318,11 +319,11 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
             coarse_texels as f64 / 1e6,
             coarse_bytes as f64 / coarse_texels.max(1) as f64,
         );
-        let per_texel = |b: &TextureBytes| b.jpeg_bytes as f64 / b.covered_texels.max(1) as f64;
+        let per_texel = |b: &TextureBytes| b.image_bytes as f64 / b.covered_texels.max(1) as f64;
         let coarse = TextureBytes {
             fragments: all.fragments - t.leaves.fragments,
             covered_texels: all.covered_texels - t.leaves.covered_texels,
-            jpeg_bytes: all.jpeg_bytes - t.leaves.jpeg_bytes,
+            image_bytes: all.image_bytes - t.leaves.image_bytes,
             header_bytes: all.header_bytes - t.leaves.header_bytes,
             ..TextureBytes::default()
         };
@@ -336,16 +337,67 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
         {
             println!(
                 "    {name}: {} fragments, {:.2} MB for {:.1} M covered texels = {:.3} bytes a \
-                 texel ({:.3} without the JPEG headers, {:.1}% of the bytes); {:.2}x the \
+                 texel ({:.3} without the image headers, {:.1}% of the bytes); {:.2}x the \
                  source's mip chain at that density",
                 b.fragments,
-                b.jpeg_bytes as f64 / 1e6,
+                b.image_bytes as f64 / 1e6,
                 b.covered_texels as f64 / 1e6,
                 per_texel(b),
-                (b.jpeg_bytes - b.header_bytes) as f64 / b.covered_texels.max(1) as f64,
-                100.0 * b.header_bytes as f64 / b.jpeg_bytes.max(1) as f64,
+                (b.image_bytes - b.header_bytes) as f64 / b.covered_texels.max(1) as f64,
+                100.0 * b.header_bytes as f64 / b.image_bytes.max(1) as f64,
                 per_texel(b) / r.max(1e-12),
             );
+        }
+        if let Some(m) = &t.webp {
+            match m.offset {
+                Some(o) => println!(
+                    "  atlas codec: WebP at quality {o:+.1} from each fragment's, the least \
+                     offset at which {} sampled atlases have JPEG's error ({:.0} against {:.0}): \
+                     {:.2} MB there against JPEG's {:.2} MB ({:.2}x)",
+                    webp_match::sample_indices(
+                        t.featured.fragments as usize + t.plain.fragments as usize
+                    )
+                    .len(),
+                    m.webp_error,
+                    m.jpeg_error,
+                    m.webp_bytes as f64 / 1e6,
+                    m.jpeg_bytes as f64 / 1e6,
+                    m.webp_bytes as f64 / m.jpeg_bytes.max(1) as f64,
+                ),
+                None => println!(
+                    "  atlas codec: JPEG (WebP did not reach JPEG's error in fewer bytes on the \
+                     sampled atlases: {:.2} MB and error {:.0} against {:.2} MB and {:.0})",
+                    m.webp_bytes as f64 / 1e6,
+                    m.webp_error,
+                    m.jpeg_bytes as f64 / 1e6,
+                    m.jpeg_error,
+                ),
+            }
+        }
+        // The two codecs side by side, every atlas measured against its raw texels.
+        println!("  atlases by codec (every atlas measured; builds not timed):");
+        for codec in [AtlasCodec::Webp, AtlasCodec::Jpeg] {
+            let measured = BuildOptions {
+                atlas_codec: codec,
+                measure_textures: true,
+                ..options.clone()
+            };
+            let report = scan.build(&out, &measured, true)?;
+            let _ = std::fs::remove_file(&out);
+            if let Some(t) = &report.textures {
+                let all = t.featured.plus(&t.plain);
+                println!(
+                    "    {:<5} {:>6.2} MB, {:.3} bytes a covered texel ({:.2}x the source \
+                     JPEG's), PSNR {:.2} dB, SSIM {:.4}; .mwlod {:.2} MB",
+                    format!("{codec:?}"),
+                    all.image_bytes as f64 / 1e6,
+                    per_texel(&all),
+                    per_texel(&all) / (jpeg as f64 / texels.max(1) as f64),
+                    all.psnr(),
+                    all.ssim(),
+                    report.output_bytes as f64 / 1e6,
+                );
+            }
         }
     }
     Ok(())
@@ -387,7 +439,7 @@ fn bench(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
         if let std::collections::btree_map::Entry::Vacant(e) = uniform.entry(q) {
             e.insert(build(scan, dir, q, 0)?);
         }
-        Ok(uniform[&q].all().jpeg_bytes)
+        Ok(uniform[&q].all().image_bytes)
     };
     let base_bytes = uniform_at(args.quality, &mut uniform)?;
     let base = &uniform[&args.quality];
@@ -419,7 +471,7 @@ fn bench(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
     );
     for &spread in &args.spreads {
         let v = build(scan, dir, args.quality, spread)?;
-        let bytes = v.all().jpeg_bytes;
+        let bytes = v.all().image_bytes;
         let (f, p) = (v.report.featured, v.report.plain);
         println!(
             "  {:<24} {:>7.3}M {:>7} | {:>6.2} {:>6.2} {:>6.2} | {:>6.4} {:>6.4} {:>6.4} | {:>5.3}M {:>5.3}M",
@@ -432,8 +484,8 @@ fn bench(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
             v.all().ssim(),
             f.ssim(),
             p.ssim(),
-            f.jpeg_bytes as f64 / 1e6,
-            p.jpeg_bytes as f64 / 1e6,
+            f.image_bytes as f64 / 1e6,
+            p.image_bytes as f64 / 1e6,
         );
         // Uniform quality at the same bytes: bisect the integer quality, then interpolate.
         let (mut lo, mut hi) = (5u8, 100u8);
@@ -450,7 +502,7 @@ fn bench(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
             }
         }
         let (a, b) = (&uniform[&lo], &uniform[&hi]);
-        let (ba, bb) = (a.all().jpeg_bytes as f64, b.all().jpeg_bytes as f64);
+        let (ba, bb) = (a.all().image_bytes as f64, b.all().image_bytes as f64);
         let t = if bb > ba {
             (bytes as f64 - ba) / (bb - ba)
         } else {
@@ -468,12 +520,12 @@ fn bench(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
             mix(&|m| m.all().ssim()),
             mix(&|m| m.report.featured.ssim()),
             mix(&|m| m.report.plain.ssim()),
-            mix(&|m| m.report.featured.jpeg_bytes as f64) / 1e6,
-            mix(&|m| m.report.plain.jpeg_bytes as f64) / 1e6,
+            mix(&|m| m.report.featured.image_bytes as f64) / 1e6,
+            mix(&|m| m.report.plain.image_bytes as f64) / 1e6,
         );
     }
     println!(
-        "  (bytes: the atlases' JPEGs; PSNR and luminance SSIM over the covered texels; \
+        "  (bytes: the atlases' images; PSNR and luminance SSIM over the covered texels; \
          \"feat.\": fragments at or above their level's mean feature value, the same fragments \
          in every build)"
     );

@@ -11,7 +11,9 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use glam::Vec3;
 use meshwiki_engine::camera::Camera;
+use meshwiki_engine::lod::atlas::AtlasCodec;
 use meshwiki_engine::lod::{self, BuildOptions, LodFile, VertexOrder};
+use meshwiki_engine::mesh::Texture;
 use meshwiki_engine::progress::NoProgress;
 use serde::Deserialize;
 use serde_json::json;
@@ -65,6 +67,10 @@ pub struct BuildArgs {
     /// file's vertex indices).
     #[arg(long, default_value_t = VertexOrder::Morton)]
     pub vertex_order: VertexOrder,
+    /// The colour atlases' image format (textured scans): `webp` (the default: at the error
+    /// JPEG would have, where that takes fewer bytes) or `jpeg`.
+    #[arg(long, default_value_t = AtlasCodec::default())]
+    pub atlas_codec: AtlasCodec,
 }
 
 /// Arguments of `lod dump`.
@@ -90,6 +96,7 @@ pub fn run(command: LodCommand) -> anyhow::Result<()> {
                 &BuildOptions {
                     normal_maps: args.normal_maps,
                     vertex_order: args.vertex_order,
+                    atlas_codec: args.atlas_codec,
                     ..BuildOptions::default()
                 },
                 &NoProgress,
@@ -172,6 +179,12 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
             "uvs": patch.uvs,
             "image_length": patch.image.as_ref().map(|i| i.len()),
             "image_crc32": patch.image.as_ref().map(|i| crc32fast::hash(i)),
+            // The image's size as the engine's decoder reads it (null where it does not).
+            "image_size": patch
+                .image
+                .as_ref()
+                .and_then(|i| Texture::decode(i).ok())
+                .map(|t| [t.width(), t.height()]),
             "normal_map_length": patch.normal_map.as_ref().map(|i| i.len()),
             "normal_map_crc32": patch.normal_map.as_ref().map(|i| crc32fast::hash(i)),
         }));

@@ -11,13 +11,13 @@ import { existsSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
-import { decodePatch, decodeYCoCg, DecodeError, JFIF_APP0, jpegSize, predict, STANDARD_DHT, standardDqt, walk } from '../../static/js/lod/decode.js';
+import { decodePatch, decodeYCoCg, DecodeError, imageSize, isWebp, JFIF_APP0, jpegSize, predict, STANDARD_DHT, standardDqt, walk, webpSize } from '../../static/js/lod/decode.js';
 import { crc32, parseBinary } from '../../static/js/lod/table.js';
 import { patchBytes } from '../../static/js/lod/stream.js';
 import { SHARED_MESHES, decoderDeps, importStatic, meshwiki, sampleMesh } from './support/env.mjs';
 import { readLod } from './support/regions.mjs';
 
-function checkFile(lodPath, dumpPath, deps) {
+function checkFile(lodPath, dumpPath, deps, codec = undefined) {
   const { file, table } = readLod(lodPath);
   const dump = JSON.parse(readFileSync(dumpPath, 'utf8'));
   assert.equal(table.nodeCount, dump.node_count);
@@ -64,7 +64,13 @@ function checkFile(lodPath, dumpPath, deps) {
       assert.ok(p.image, `image of node ${i}`);
       assert.equal(p.image.length, ref.image_length, `image length of node ${i}`);
       assert.equal(crc32(p.image), ref.image_crc32, `image of node ${i}`);
-      assert.ok(jpegSize(p.image), `node ${i}'s image is a JPEG with a size`);
+      // The size the viewer reads from the image's header (JPEG or WebP) is the one the
+      // engine's decoder finds (binaries from before `image_size` give none).
+      assert.ok(imageSize(p.image), `node ${i}'s image has a size`);
+      if (ref.image_size !== undefined) {
+        assert.deepEqual(imageSize(p.image), { width: ref.image_size[0], height: ref.image_size[1] }, `image size of node ${i}`);
+      }
+      if (codec !== undefined) assert.equal(isWebp(p.image), codec === 'webp', `node ${i}'s image is ${codec}`);
       assert.deepEqual(Array.from(p.uvs), ref.uvs.flat().map(Math.fround), `texture coordinates of node ${i}`);
       // Wedges: copies of a vertex (one per chart) decode to the same grid position.
       const at = new Map();
@@ -140,18 +146,25 @@ test('decodes every patch of a textured LOD file exactly as the engine does', as
   const deps = await decoderDeps();
   const tmp = mkdtempSync(join(tmpdir(), 'mw-decode-tex-'));
   t.after(() => rmSync(tmp, { recursive: true, force: true }));
-  const lod = join(tmp, 'textured.mwlod');
-  const dump = join(tmp, 'textured.json');
-  meshwiki(['lod', 'build', TEXTURED_GLTF, lod]);
-  meshwiki(['lod', 'dump', lod, '--out', dump]);
-  if (JSON.parse(readFileSync(dump, 'utf8')).has_texture === undefined) {
-    t.skip('this meshwiki binary predates textured LOD files');
-    return;
+  // The default (WebP atlases, which on this scan reach JPEG's error in fewer bytes), JPEG
+  // atlases (their tables and headers left out), and WebP atlases beside JPEG normal maps
+  // (the JPEG flags then speak of the normal maps alone).
+  const variants = [
+    { name: 'default', args: [], codec: 'webp' },
+    { name: 'jpeg', args: ['--atlas-codec', 'jpeg'], codec: 'jpeg' },
+    { name: 'normal-maps', args: ['--normal-maps'], codec: 'webp' },
+  ];
+  for (const { name, args, codec } of variants) {
+    const lod = join(tmp, `${name}.mwlod`);
+    const dump = join(tmp, `${name}.json`);
+    meshwiki(['lod', 'build', ...args, TEXTURED_GLTF, lod]);
+    meshwiki(['lod', 'dump', lod, '--out', dump]);
+    const { nodes, vertices } = checkFile(lod, dump, deps, codec);
+    const { table } = readLod(lod);
+    assert.ok(table.hasTexture, 'the textured scan builds a textured model');
+    assert.equal(table.hasNormalMaps, name === 'normal-maps');
+    t.diagnostic(`${TEXTURED_GLTF} (${name}): ${nodes} textured patches, ${vertices} vertices decoded identically`);
   }
-  const { nodes, vertices } = checkFile(lod, dump, deps);
-  const { table } = readLod(lod);
-  assert.ok(table.hasTexture, 'the textured scan builds a textured model');
-  t.diagnostic(`${TEXTURED_GLTF}: ${nodes} textured patches, ${vertices} vertices decoded identically`);
 });
 
 test('corrupt blobs are errors, never crashes or hangs', async () => {
@@ -464,6 +477,34 @@ test('texture coordinates by chart: one affine map per chart, bit for bit (hand-
   const noUvFlag = blob.slice();
   noUvFlag[blob.length - payload.length + 8] &= ~4;
   assert.throws(() => decodePatch(noUvFlag, grid, deps), DecodeError);
+});
+
+test('WebP sizes come from the first chunk', () => {
+  // Lossy: frame tag (3 bytes), start code, then 14-bit width and height (2 bits of scale).
+  const riff = (chunk, body) => {
+    const size = 4 + 8 + body.length;
+    return Uint8Array.from([...'RIFF'].map((c) => c.charCodeAt(0)).concat([size & 255, size >> 8, 0, 0], [...`WEBP${chunk}`].map((c) => c.charCodeAt(0)), [body.length & 255, body.length >> 8, 0, 0], body));
+  };
+  const lossy = riff('VP8 ', [0x30, 0x01, 0x00, 0x9d, 0x01, 0x2a, 0x00, 0x10 | 0x40, 0x00, 0x08, 0, 0]);
+  assert.equal(isWebp(lossy), true);
+  assert.deepEqual(webpSize(lossy), { width: 4096, height: 2048 });
+  assert.deepEqual(imageSize(lossy), { width: 4096, height: 2048 });
+  // A broken start code, a truncated file, and a JPEG are no WebP sizes.
+  const broken = lossy.slice();
+  broken[24] = 0;
+  assert.equal(webpSize(broken), null);
+  assert.equal(webpSize(lossy.subarray(0, 28)), null);
+  assert.equal(webpSize(fakeJpeg(64, 48)), null);
+  assert.deepEqual(imageSize(fakeJpeg(64, 48)), { width: 64, height: 48 });
+  // Lossless: signature 0x2f, then 14-bit width − 1 and height − 1.
+  const w = 300 - 1;
+  const h = 200 - 1;
+  const bits = w | (h << 14);
+  const lossless = riff('VP8L', [0x2f, bits & 255, (bits >> 8) & 255, (bits >> 16) & 255, (bits >>> 24) & 255, 0, 0, 0, 0, 0]);
+  assert.deepEqual(webpSize(lossless), { width: 300, height: 200 });
+  // Extended: flags (4 bytes), then 24-bit canvas width − 1 and height − 1.
+  const extended = riff('VP8X', [0, 0, 0, 0, 0x3f, 0x01, 0x00, 0xef, 0x00, 0x00]);
+  assert.deepEqual(webpSize(extended), { width: 320, height: 240 });
 });
 
 test('JPEG sizes come from the frame header', () => {

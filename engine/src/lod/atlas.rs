@@ -1104,6 +1104,90 @@ pub fn encode_normal_jpeg(image: &Texture, quality: u8) -> Vec<u8> {
     jpeg(image, quality, jpeg_encoder::SamplingFactor::F_1_1)
 }
 
+/// The image format of the colour atlases (`BuildOptions::atlas_codec`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AtlasCodec {
+    /// Baseline JPEG (4:2:0, standard tables), stored without its tables and headers.
+    Jpeg,
+    /// Lossy WebP (VP8, 4:2:0) at the error JPEG would have at the fragment's quality
+    /// ([`super::webp_match`]), where that takes fewer bytes than JPEG; else JPEG. VP8 predicts
+    /// each block from its decoded neighbours, so the smooth fill between an atlas' charts and
+    /// the chart borders, which cost a JPEG block as much as detail does, cost it little.
+    #[default]
+    Webp,
+}
+
+impl AtlasCodec {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AtlasCodec::Jpeg => "jpeg",
+            AtlasCodec::Webp => "webp",
+        }
+    }
+}
+
+impl std::fmt::Display for AtlasCodec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for AtlasCodec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "jpeg" => Ok(AtlasCodec::Jpeg),
+            "webp" => Ok(AtlasCodec::Webp),
+            other => Err(format!("unknown atlas codec {other:?}: `webp` or `jpeg`")),
+        }
+    }
+}
+
+/// Bytes of an atlas image before its entropy-coded data: a JPEG's marker segments up to and
+/// with its scan header, a WebP's RIFF container and `VP8 ` chunk headers (20 bytes).
+pub fn header_len(image: &[u8]) -> usize {
+    if is_webp(image) {
+        WEBP_HEADER.min(image.len())
+    } else {
+        super::jpegtables::header_len(image)
+    }
+}
+
+/// RIFF header (12 bytes) and the first chunk's header (8) of a WebP file.
+const WEBP_HEADER: usize = 20;
+
+/// Whether `bytes` is a WebP file (RIFF container of form `WEBP`).
+pub fn is_webp(bytes: &[u8]) -> bool {
+    bytes.len() >= 12 && &bytes[..4] == b"RIFF" && &bytes[8..12] == b"WEBP"
+}
+
+/// libwebp's effort (`method`, 0–6) for the atlases: 2 takes about half the time of the
+/// default 4 for 5–10% more bytes at equal error (`scripts/atlas-codecs.py`), and the atlases'
+/// encoding is a share of a textured build's time that its time target counts.
+pub const WEBP_METHOD: i32 = 2;
+
+/// Lossy WebP (VP8, 4:2:0) of an atlas at `quality` (0–100, WebP's scale) and
+/// [`WEBP_METHOD`]; empty where libwebp refuses it (a side over 16383 texels: atlases are at
+/// most [`MAX_SIDE`]).
+pub fn encode_webp(image: &Texture, quality: f32) -> Vec<u8> {
+    let rgb: Vec<u8> = image
+        .texels()
+        .iter()
+        .flat_map(|t| [t[0], t[1], t[2]])
+        .collect();
+    let Ok(mut config) = webp::WebPConfig::new() else {
+        return Vec::new();
+    };
+    config.lossless = 0;
+    config.quality = quality.clamp(0.0, 100.0);
+    config.method = WEBP_METHOD;
+    let encoder = webp::Encoder::from_rgb(&rgb, image.width(), image.height());
+    match encoder.encode_advanced(&config) {
+        Ok(bytes) => bytes.to_vec(),
+        Err(_) => Vec::new(),
+    }
+}
+
 fn jpeg(image: &Texture, quality: u8, sampling: jpeg_encoder::SamplingFactor) -> Vec<u8> {
     let rgb: Vec<u8> = image
         .texels()

@@ -13,7 +13,9 @@
 //! patches live in scratch files between levels, and only a bucket or a group per worker is
 //! in memory at a time.
 
-use super::atlas::{self, FinerPatch, FinerSurface, Maps, PatchTexture, Resampled, SourceColors};
+use super::atlas::{
+    self, AtlasCodec, FinerPatch, FinerSurface, Maps, PatchTexture, Resampled, SourceColors,
+};
 use super::bounds::{Sphere, merge_spheres, normal_cone, sphere_of_points};
 use super::buckets::{KdSplit, read_bucket, write_buckets};
 use super::codec::{self, Grid, PatchRef};
@@ -29,6 +31,7 @@ use super::planar_chart;
 use super::segsimplify::Simplifier;
 use super::simplify::{merge, simplify_group, split_tracked};
 use super::vertex_order::{self, VertexOrder};
+use super::webp_match;
 use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink, SourceTexture, TexturedFace};
 use crate::progress::Progress;
 use crate::segment::{self, Collector};
@@ -63,15 +66,17 @@ pub struct BuildOptions {
     pub zstd_level: i32,
     /// Patches per group.
     pub group_size: usize,
-    /// JPEG quality (1–100) of the patches' texture atlases (textured scans): the mean over
-    /// each level's fragments.
+    /// Quality (1–100, on JPEG's scale whatever the codec: [`webp_match`]) of the
+    /// patches' texture atlases (textured scans): the mean over each level's fragments.
     pub texture_quality: u8,
-    /// How far a fragment's JPEG quality moves from `texture_quality` with the density of
+    /// The image format of the colour atlases (normal maps are JPEGs, 4:4:4, in any case).
+    pub atlas_codec: AtlasCodec,
+    /// How far a fragment's quality moves from `texture_quality` with the density of
     /// surface and texture features it holds (the TexMesh paper's ΔQ,
     /// [`super::fragment_quality`]); 0 gives every fragment the same quality.
     pub texture_spread: u8,
-    /// Measure every atlas' JPEG error against its raw texels ([`TextureReport`]; decodes
-    /// each JPEG once more, for benchmarks).
+    /// Measure every atlas image's error against its raw texels ([`TextureReport`]; decodes
+    /// each image once more, for benchmarks).
     pub measure_textures: bool,
     /// Bake a normal map into every coarse patch (issue 11 item 4, the progressive-transmission
     /// paper): the finest surface's normals, so a coarse patch shades like the scan. Off by
@@ -118,6 +123,7 @@ impl Default for BuildOptions {
             zstd_level: 19,
             group_size: 8,
             texture_quality: 85,
+            atlas_codec: AtlasCodec::default(),
             texture_spread: DEFAULT_TEXTURE_SPREAD,
             measure_textures: false,
             normal_maps: false,
@@ -165,8 +171,11 @@ pub struct NormalMapBytes {
 /// What a textured build's atlases cost (issue 11, item 3).
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct TextureReport {
-    /// Quality of the JPEGs: least, mean, most.
+    /// Quality of the fragments (JPEG's scale): least, mean, most.
     pub quality: (u8, f32, u8),
+    /// How WebP matched JPEG's error on the sampled atlases (the WebP codec; its offset
+    /// `None` where the build kept JPEG).
+    pub webp: Option<webp_match::Match>,
     /// Fragments at or above their level's mean feature value ([`fragment_quality`]).
     pub featured: TextureBytes,
     /// The other fragments.
@@ -182,11 +191,12 @@ pub struct TextureBytes {
     pub fragments: u32,
     /// Texels inside the atlases' triangles.
     pub covered_texels: u64,
-    pub jpeg_bytes: u64,
-    /// Of `jpeg_bytes`, the JPEGs' headers: everything before the entropy-coded data (markers,
-    /// quantisation and Huffman tables, frame and scan headers).
+    pub image_bytes: u64,
+    /// Of `image_bytes`, the images' headers: everything before the entropy-coded data (JPEG:
+    /// markers, quantisation and Huffman tables, frame and scan headers as stored; WebP: its
+    /// container and chunk header, [`atlas::header_len`]).
     pub header_bytes: u64,
-    /// Squared error of the decoded JPEGs' covered texels (8-bit RGB) against the raw atlas.
+    /// Squared error of the decoded images' covered texels (8-bit RGB) against the raw atlas.
     pub squared_error: f64,
     /// Channel samples measured (three a covered texel; 0 when not measured).
     pub samples: u64,
@@ -215,7 +225,7 @@ impl TextureBytes {
         TextureBytes {
             fragments: self.fragments + o.fragments,
             covered_texels: self.covered_texels + o.covered_texels,
-            jpeg_bytes: self.jpeg_bytes + o.jpeg_bytes,
+            image_bytes: self.image_bytes + o.image_bytes,
             header_bytes: self.header_bytes + o.header_bytes,
             squared_error: self.squared_error + o.squared_error,
             samples: self.samples + o.samples,
@@ -1042,9 +1052,9 @@ impl<'a> Builder<'a> {
         Ok(pool.into_iter().map(|p| p.node).collect())
     }
 
-    /// Step 5a (textured scans): every fragment's JPEG quality from its features among its
-    /// level's ([`fragment_quality`]), and the JPEG put in its patch's blob. The blobs move to
-    /// a new scratch file.
+    /// Step 5a (textured scans): every fragment's quality from its features among its level's
+    /// ([`fragment_quality`]), and its image (WebP at JPEG's error, [`webp_match`], or JPEG)
+    /// put in its patch's blob. The blobs move to a new scratch file.
     fn place_atlases(&mut self) -> Result<TextureReport, BuildError> {
         self.blobs.flush()?;
         self.atlases.flush()?;
@@ -1068,6 +1078,13 @@ impl<'a> Builder<'a> {
             quality[i] = Some((q, n[k] >= gamma[k]));
         }
         self.progress.stage(ATLAS_STAGE, self.nodes.len() as u64);
+        // WebP at JPEG's error, measured on a sample of the atlases ([`webp_match`]).
+        let webp = if self.options.atlas_codec == AtlasCodec::Webp && !textured.is_empty() {
+            Some(self.match_webp(&textured, &quality)?)
+        } else {
+            None
+        };
+        let webp_offset = webp.and_then(|m| m.offset);
         let placed = ScratchFile::create(&self.scratch.join("patches.placed"))?;
         let mut report = TextureReport::default();
         let mut quality_sum = 0u64;
@@ -1089,7 +1106,10 @@ impl<'a> Builder<'a> {
                         return Ok((blob, None, None));
                     };
                     let color = match (quality[i], &atlas.image) {
-                        (Some((q, _)), Some(image)) => Some(atlas::encode_jpeg(image, q)),
+                        (Some((q, _)), Some(image)) => Some(match webp_offset {
+                            Some(o) => atlas::encode_webp(image, f32::from(q) + o),
+                            None => atlas::encode_jpeg(image, q),
+                        }),
                         _ => None,
                     };
                     let normals = atlas
@@ -1099,20 +1119,20 @@ impl<'a> Builder<'a> {
                     let blob = codec::with_images(&blob, color.as_deref(), normals.as_deref())
                         .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
                     // Bytes as stored: without the tables and headers the blob leaves out.
-                    let saved = color.as_ref().map_or(0, |jpeg| {
-                        jpeg.len().saturating_sub(codec::stored_image_len(&blob)) as u64
+                    let saved = color.as_ref().map_or(0, |encoded| {
+                        encoded.len().saturating_sub(codec::stored_image_len(&blob)) as u64
                     });
                     let measured = match (&color, &atlas.image) {
-                        (Some(jpeg), Some(image)) => {
+                        (Some(encoded), Some(image)) => {
                             let mut m = measure_atlas(
                                 image,
                                 &atlas.uvs,
                                 &atlas.covered,
-                                jpeg,
+                                encoded,
                                 n.features.covered_texels,
                                 this.options.measure_textures,
                             )?;
-                            m.jpeg_bytes -= saved;
+                            m.image_bytes -= saved;
                             m.header_bytes -= saved;
                             Some(m)
                         }
@@ -1157,7 +1177,40 @@ impl<'a> Builder<'a> {
             quality_sum as f32 / fragments.max(1) as f32,
             q_max,
         );
+        report.webp = webp;
         Ok(report)
+    }
+
+    /// [`webp_match::match_jpeg`] on an even sample of the colour atlases (`textured`, in
+    /// node order), each at its fragment's quality.
+    fn match_webp(
+        &self,
+        textured: &[usize],
+        quality: &[Option<(u8, bool)>],
+    ) -> io::Result<webp_match::Match> {
+        let mut picked = Vec::new();
+        for k in webp_match::sample_indices(textured.len()) {
+            let i = textured[k];
+            if let (Some(atlas), Some((q, _))) = (self.load_atlas(i as u32, true)?, quality[i])
+                && let Some(image) = &atlas.image
+            {
+                let (w, h) = (image.width() as usize, image.height() as usize);
+                let covered = fragment_quality::covered_or_found(&atlas.covered, w, h, &atlas.uvs)
+                    .into_owned();
+                picked.push((atlas, covered, q));
+            }
+        }
+        let samples: Vec<webp_match::Sample> = picked
+            .iter()
+            .filter_map(|(atlas, covered, q)| {
+                Some(webp_match::Sample {
+                    image: atlas.image.as_ref()?,
+                    covered,
+                    quality: *q,
+                })
+            })
+            .collect();
+        Ok(webp_match::match_jpeg(&samples))
     }
 
     /// Step 5: tables and blobs in locality order.
@@ -1275,15 +1328,15 @@ fn measure_atlas(
     image: &mesh::Texture,
     uvs: &[[f32; 2]],
     covered: &[bool],
-    jpeg: &[u8],
+    encoded: &[u8],
     covered_texels: u64,
     measure: bool,
 ) -> io::Result<TextureBytes> {
     let mut bytes = TextureBytes {
         fragments: 1,
         covered_texels,
-        jpeg_bytes: jpeg.len() as u64,
-        header_bytes: super::jpegtables::header_len(jpeg) as u64,
+        image_bytes: encoded.len() as u64,
+        header_bytes: atlas::header_len(encoded) as u64,
         ..TextureBytes::default()
     };
     if measure {
@@ -1291,9 +1344,9 @@ fn measure_atlas(
         // The texels the bake sampled (as the features counted them), else those inside the
         // triangles.
         let covered = fragment_quality::covered_or_found(covered, w, h, uvs);
-        let back = mesh::Texture::decode(jpeg).map_err(io::Error::other)?;
+        let back = mesh::Texture::decode(encoded).map_err(io::Error::other)?;
         let ssim = fragment_quality::ssim_map(image, &back)
-            .ok_or_else(|| io::Error::other("the JPEG decodes to another size"))?;
+            .ok_or_else(|| io::Error::other("the atlas image decodes to another size"))?;
         for (((&c, a), b), s) in covered
             .iter()
             .zip(image.texels())

@@ -82,6 +82,10 @@ const BLOB_STANDARD_HUFFMAN: u8 = 4;
 /// also stored without their JFIF APP0 segment and quantisation tables, the standard ones
 /// scaled by the quality each section starts with ([`jpegtables::strip_headers`]).
 const BLOB_STANDARD_HEADERS: u8 = 8;
+/// Blob header flag (byte 5), only with [`BLOB_IMAGE`]: the image section is a WebP
+/// ([`super::atlas::AtlasCodec::Webp`]), stored whole; bits 2 and 3 then speak of the
+/// normal-map section alone.
+const BLOB_IMAGE_WEBP: u8 = 16;
 const PAYLOAD_HEADER: usize = 52;
 /// Octahedral normal quantisation: components in `-OCT_SCALE..=OCT_SCALE` (8 bits).
 pub const OCT_SCALE: f64 = 127.0;
@@ -979,20 +983,22 @@ fn encode_split(
     (blob, used)
 }
 
-/// Appends the image sections to a blob header (12 bytes, flags at byte 5 set here): without
-/// their Huffman tables where every image present has the standard ones, and also without
-/// their JFIF segment and quantisation tables where every image has the standard ones
-/// ([`super::jpegtables`]); whole otherwise. An image is a JPEG of at most
-/// [`super::atlas::MAX_SIDE`]² texels: far below 4 GiB.
+/// Appends the image sections to a blob header (12 bytes, flags at byte 5 set here). A WebP
+/// colour atlas is stored whole ([`BLOB_IMAGE_WEBP`]). The JPEG sections go without their
+/// Huffman tables where every one has the standard ones, and also without their JFIF segment
+/// and quantisation tables where every one has the standard ones ([`super::jpegtables`]);
+/// whole otherwise. An image is at most [`super::atlas::MAX_SIDE`]² texels: far below 4 GiB.
 fn push_sections(blob: &mut Vec<u8>, image: Option<&[u8]>, normals: Option<&[u8]>) {
-    let present = [image, normals];
-    let huffman = present.map(|i| i.and_then(jpegtables::strip_standard_huffman));
+    let webp = image.is_some_and(super::atlas::is_webp);
+    // The sections the JPEG flags speak of.
+    let jpegs = [image.filter(|_| !webp), normals];
+    let huffman = jpegs.map(|i| i.and_then(jpegtables::strip_standard_huffman));
     let headers = huffman
         .each_ref()
         .map(|i| i.as_deref().and_then(jpegtables::strip_headers));
     let all = |stripped: &[Option<Vec<u8>>; 2]| {
-        present.iter().any(Option::is_some)
-            && present
+        jpegs.iter().any(Option::is_some)
+            && jpegs
                 .iter()
                 .zip(stripped)
                 .all(|(p, s)| p.is_none() || s.is_some())
@@ -1008,8 +1014,14 @@ fn push_sections(blob: &mut Vec<u8>, image: Option<&[u8]>, normals: Option<&[u8]
         (0, None)
     };
     blob[5] = flags;
-    for (k, flag) in [BLOB_IMAGE, BLOB_NORMALS].into_iter().enumerate() {
-        if let Some(whole) = present[k] {
+    if webp {
+        blob[5] |= BLOB_IMAGE_WEBP;
+    }
+    for (k, (flag, whole)) in [(BLOB_IMAGE, image), (BLOB_NORMALS, normals)]
+        .into_iter()
+        .enumerate()
+    {
+        if let Some(whole) = whole {
             let bytes = match stripped.and_then(|s| s[k].as_deref()) {
                 Some(s) => s,
                 None => whole,
@@ -1042,15 +1054,20 @@ fn sections(blob: &[u8]) -> Result<Sections<'_>, CodecError> {
     Ok((image, normals, at))
 }
 
-/// Whether a blob's image sections are stored without their (standard) Huffman tables.
+/// Whether a blob's JPEG sections are stored without their (standard) Huffman tables.
 pub fn images_without_tables(blob: &[u8]) -> bool {
     blob.get(5).is_some_and(|f| f & BLOB_STANDARD_HUFFMAN != 0)
 }
 
-/// Whether `blob`'s images are also stored without their JFIF segment and quantisation
-/// tables ([`jpegtables::strip_headers`]).
+/// Whether `blob`'s JPEG sections are also stored without their JFIF segment and
+/// quantisation tables ([`jpegtables::strip_headers`]).
 pub fn images_without_headers(blob: &[u8]) -> bool {
     blob.get(5).is_some_and(|f| f & BLOB_STANDARD_HEADERS != 0)
+}
+
+/// Whether `blob`'s image section (the colour atlas) is a WebP, stored whole.
+pub fn image_is_webp(blob: &[u8]) -> bool {
+    blob.get(5).is_some_and(|f| f & BLOB_IMAGE_WEBP != 0)
 }
 
 /// Bytes of `blob`'s image section as stored (0 where it has none).
@@ -1246,7 +1263,7 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
         payload,
         ..
     } = unframe(blob, (64 << 20).min(payload_bound(max_triangles)))?;
-    // Images stored without their (standard) tables and headers get them back.
+    // JPEGs stored without their (standard) tables and headers get them back.
     let whole = |i: &[u8]| {
         let i = if images_without_headers(blob) {
             jpegtables::with_headers(i)
@@ -1259,7 +1276,11 @@ pub fn decode_limited(blob: &[u8], grid: &Grid, max_triangles: u32) -> Result<Pa
             i
         }
     };
-    let image = image.map(whole);
+    let image = if image_is_webp(blob) {
+        image.map(<[u8]>::to_vec)
+    } else {
+        image.map(whole)
+    };
     let normal_map = normal_map.map(whole);
     let vertex_count = u32_at(&payload, 0)?;
     let triangle_count = u32_at(&payload, 4)?;
@@ -1731,6 +1752,37 @@ mod tests {
         assert_eq!(
             decode(&mixed, &grid).expect("decodes").image.as_deref(),
             Some(&jpeg[..])
+        );
+        // A WebP atlas is stored whole and flagged; the JPEG normal map beside it still goes
+        // without its tables and headers, and both decode byte for byte.
+        let webp = super::super::atlas::encode_webp(&texture, 85.0);
+        assert!(super::super::atlas::is_webp(&webp));
+        let both = with_images(&empty, Some(&webp), Some(&normal_jpeg)).expect("a blob");
+        assert_eq!(
+            both[5],
+            BLOB_IMAGE
+                | BLOB_NORMALS
+                | BLOB_IMAGE_WEBP
+                | BLOB_STANDARD_HUFFMAN
+                | BLOB_STANDARD_HEADERS
+        );
+        assert!(image_is_webp(&both));
+        let (bytes, _) = blob_bytes(&both).expect("frames");
+        assert_eq!(
+            (bytes.image, bytes.normal_map + tables),
+            (webp.len(), normal_jpeg.len())
+        );
+        let w = decode(&both, &grid).expect("decodes");
+        assert_eq!(w.image.as_deref(), Some(&webp[..]));
+        assert_eq!(w.normal_map.as_deref(), Some(&normal_jpeg[..]));
+        let back = crate::mesh::Texture::decode(&webp).expect("the engine decodes its WebP");
+        assert_eq!((back.width(), back.height()), (16, 8));
+        // A WebP alone sets no JPEG flag.
+        let lone = with_images(&empty, Some(&webp), None).expect("a blob");
+        assert_eq!(lone[5], BLOB_IMAGE | BLOB_IMAGE_WEBP);
+        assert_eq!(
+            decode(&lone, &grid).expect("decodes").image.as_deref(),
+            Some(&webp[..])
         );
         // A declared normal map longer than the blob is refused.
         let mut bad = alone.clone();

@@ -30,6 +30,7 @@ pub mod simplify;
 pub mod sparse;
 mod spill;
 pub mod vertex_order;
+pub mod webp_match;
 
 pub use build::{
     BuildError, BuildOptions, BuildReport, build_file, build_from, build_mesh, peak_rss_bytes,

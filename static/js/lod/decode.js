@@ -45,6 +45,11 @@ const BLOB_STANDARD_HUFFMAN = 4;
  * APP0 segment and their (standard, scaled) quantisation tables; each starts with its quality.
  */
 const BLOB_STANDARD_HEADERS = 8;
+/**
+ * Blob header flag (byte 5), with BLOB_IMAGE: the image section is a WebP, stored whole; the
+ * JPEG flags then speak of the normal-map section alone.
+ */
+const BLOB_IMAGE_WEBP = 16;
 
 /**
  * The standard Huffman tables of ITU-T T.81 Annex K.3 as four DHT segments (DC and AC
@@ -407,6 +412,58 @@ export function decodeYCoCg(c) {
 }
 
 /**
+ * Whether `bytes` is a WebP file (a RIFF container of form `WEBP`).
+ * @param {Uint8Array} bytes
+ */
+export function isWebp(bytes) {
+  return !!bytes && bytes.length >= 12 && ascii(bytes, 0, 4) === 'RIFF' && ascii(bytes, 8, 12) === 'WEBP';
+}
+
+function ascii(bytes, from, to) {
+  return String.fromCharCode(...bytes.subarray(from, to));
+}
+
+/**
+ * Width and height of an atlas image (JPEG or WebP) from its header, without decoding it;
+ * null when it is neither or its header holds no size.
+ * @param {Uint8Array} bytes
+ * @returns {{width: number, height: number}|null}
+ */
+export function imageSize(bytes) {
+  return isWebp(bytes) ? webpSize(bytes) : jpegSize(bytes);
+}
+
+/**
+ * Width and height of a WebP image from its first chunk: a lossy `VP8 ` frame header (14-bit
+ * sizes after the start code), a lossless `VP8L` header (14-bit sizes less one) or an extended
+ * `VP8X` header (24-bit canvas sizes less one); null otherwise.
+ * @param {Uint8Array} bytes
+ * @returns {{width: number, height: number}|null}
+ */
+export function webpSize(bytes) {
+  if (!isWebp(bytes) || bytes.length < 30) return null;
+  const chunk = ascii(bytes, 12, 16);
+  let width = 0;
+  let height = 0;
+  if (chunk === 'VP8 ') {
+    if (bytes[23] !== 0x9d || bytes[24] !== 0x01 || bytes[25] !== 0x2a) return null;
+    width = (bytes[26] | (bytes[27] << 8)) & 0x3fff;
+    height = (bytes[28] | (bytes[29] << 8)) & 0x3fff;
+  } else if (chunk === 'VP8L') {
+    if (bytes[20] !== 0x2f) return null;
+    const bits = bytes[21] | (bytes[22] << 8) | (bytes[23] << 16) | (bytes[24] << 24);
+    width = (bits & 0x3fff) + 1;
+    height = ((bits >>> 14) & 0x3fff) + 1;
+  } else if (chunk === 'VP8X') {
+    width = (bytes[24] | (bytes[25] << 8) | (bytes[26] << 16)) + 1;
+    height = (bytes[27] | (bytes[28] << 8) | (bytes[29] << 16)) + 1;
+  } else {
+    return null;
+  }
+  return width > 0 && height > 0 ? { width, height } : null;
+}
+
+/**
  * Width and height of a JPEG image from its frame header (the first SOFn marker), without
  * decoding it; null when `bytes` is not a JPEG or has no frame header with a size.
  * @param {Uint8Array} bytes
@@ -713,7 +770,7 @@ export function decodePatch(blob, grid, deps) {
     const headed = blob[5] & BLOB_STANDARD_HEADERS ? withStandardHeaders(bytes) : bytes;
     return blob[5] & BLOB_STANDARD_HUFFMAN ? withStandardHuffman(headed) : headed;
   };
-  const image = whole(section(BLOB_IMAGE));
+  const image = blob[5] & BLOB_IMAGE_WEBP ? section(BLOB_IMAGE) : whole(section(BLOB_IMAGE));
   const normalMap = whole(section(BLOB_NORMALS));
   let payload;
   if (blob[4] === COMPRESSION_NONE) {

@@ -1,12 +1,12 @@
 // Decoding worker: checks a patch blob's CRC, decodes it (decode.js) and sends back
-// GPU-ready arrays (transferred, not copied), and for textured patches the atlas' JPEG bytes
+// GPU-ready arrays (transferred, not copied), and for textured patches the atlas' image bytes
 // (decoded to a bitmap on the main thread, scene.js) with its size read from its header.
 // Started as a module worker by workers.js.
 // Import maps do not reach workers, so the vendor modules are imported by URL.
 
 import { MeshoptDecoder } from '/static/vendor/meshoptimizer/meshopt_decoder.mjs';
 import { decompress } from '/static/vendor/fzstd/esm/index.mjs';
-import { decodePatch, computedNormals, jpegSize } from './decode.js';
+import { decodePatch, computedNormals, imageSize, jpegSize } from './decode.js';
 import { crc32 } from './table.js';
 
 const ready = MeshoptDecoder.ready.then(() => ({ meshopt: MeshoptDecoder, decompress }));
@@ -17,7 +17,7 @@ function pack(p) {
   const normals = p.normals || computedNormals(p.positions, p.indices, p.vertexCount);
   // A texture needs both the image and the coordinates (docs/FORMAT.md "Textures").
   const textured = p.image !== null && p.uvs !== null;
-  const size = textured ? jpegSize(p.image) : null;
+  const size = textured ? imageSize(p.image) : null;
   const mapped = p.normalMap !== null && p.uvs !== null;
   const mapSize = mapped ? jpegSize(p.normalMap) : null;
   return {

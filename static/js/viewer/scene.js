@@ -14,6 +14,7 @@
 import * as THREE from 'three';
 import { OutlinePass } from './outline.js';
 import { SHARPNESS, SLOTS } from '../lumigraph/repository.js';
+import { isWebp } from '../lod/decode.js';
 
 export const BACKGROUND = 0x1d2026;
 const BASE_COLOR = [209 / 255, 204 / 255, 194 / 255, 1];
@@ -460,14 +461,15 @@ export class SceneView {
   }
 
   /**
-   * Decodes a patch's atlas or normal map (JPEG bytes, `key` 'texture' or 'normalMap') and
+   * Decodes a patch's atlas or normal map (JPEG or WebP bytes, `key` 'texture' or 'normalMap') and
    * gives it to its mesh, if still resident.
    */
   async loadTexture(node, mesh, bytes, key) {
     let bitmap;
     try {
       // The texels as stored: no colour management (sRGB bytes, like vertex colours).
-      bitmap = await createImageBitmap(new Blob([bytes], { type: 'image/jpeg' }), { premultiplyAlpha: 'none', colorSpaceConversion: 'none' });
+      const type = isWebp(bytes) ? 'image/webp' : 'image/jpeg';
+      bitmap = await createImageBitmap(new Blob([bytes], { type }), { premultiplyAlpha: 'none', colorSpaceConversion: 'none' });
     } catch (e) {
       console.warn(`meshwiki viewer: texture of patch ${node}:`, (e && e.message) || e);
       return;
