@@ -1,14 +1,16 @@
 #!/usr/bin/env python3
-"""JPEG against lossy WebP on atlas-like images: the calibration behind
-`engine/src/lod/atlas.rs` `WEBP_EQUAL` (the WebP quality whose error matches JPEG's).
+"""JPEG against lossy WebP on atlas-like images: how far apart the two quality scales are at
+equal error, and what WebP saves there (`engine/src/lod/webp_match.rs` finds the offset on
+each build's own atlases).
 
 An atlas holds charts (irregular regions of a photograph) with a smooth fill between them
 (the build's push-pull). Each crop here is a random square of the texture, with a blob-shaped
 region of 40–60% kept as the chart and the rest filled by diffusion from it. Every crop is
 encoded by JPEG (libjpeg's standard tables, 4:2:0, the build's baseline layout) and by WebP
-(libwebp, method 4 as the build uses), and scored over the chart's texels only, as the build's
-`TextureReport` scores an atlas. Bytes are per chart texel; JPEG's as the build stores them
-(without the JFIF segment and tables, `jpegtables`), WebP's whole.
+(libwebp, method 2 as the build uses, `atlas::WEBP_METHOD`), and scored over the chart's
+texels only, as the build's `TextureReport` scores an atlas. Bytes are per chart texel:
+JPEG's as the build stores them (without the JFIF segment and tables, `jpegtables`), WebP's
+whole.
 
 For each JPEG quality it prints the PSNR and the WebP quality of equal PSNR (interpolated).
 
@@ -80,7 +82,7 @@ def jpeg(q):
 def webp(q):
     def encode(image):
         b = io.BytesIO()
-        Image.fromarray(image).save(b, "WEBP", quality=q, method=4)
+        Image.fromarray(image).save(b, "WEBP", quality=q, method=2)
         return b.getvalue()
 
     return encode

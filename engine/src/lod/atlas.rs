@@ -1162,8 +1162,8 @@ pub fn is_webp(bytes: &[u8]) -> bool {
 }
 
 /// libwebp's effort (`method`, 0–6) for the atlases: 2 takes about half the time of the
-/// default 4 for 5–10% more bytes at equal error (`scripts/atlas-codecs.py`), and the atlases'
-/// encoding is a share of a textured build's time that its time target counts.
+/// default 4 for 5–10% more bytes at equal error (`scripts/atlas-codecs.py` with each), and
+/// the atlases' encoding is a share of a textured build's time, which issue 11 bounds.
 pub const WEBP_METHOD: i32 = 2;
 
 /// Lossy WebP (VP8, 4:2:0) of an atlas at `quality` (0–100, WebP's scale) and
