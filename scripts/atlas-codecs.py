@@ -70,22 +70,23 @@ def score(crops, encode, size):
     return nbytes / texels, 10 * np.log10(255.0**2 / (se / n))
 
 
-def jpeg(q):
+def encoder(fmt, **options):
+    """An encoder of crops to `fmt` with Pillow's `options` (quality and the like)."""
+
     def encode(image):
         b = io.BytesIO()
-        Image.fromarray(image).save(b, "JPEG", quality=q, subsampling=2)
+        Image.fromarray(image).save(b, fmt, **options)
         return b.getvalue()
 
     return encode
+
+
+def jpeg(q):
+    return encoder("JPEG", quality=q, subsampling=2)
 
 
 def webp(q):
-    def encode(image):
-        b = io.BytesIO()
-        Image.fromarray(image).save(b, "WEBP", quality=q, method=2)
-        return b.getvalue()
-
-    return encode
+    return encoder("WEBP", quality=q, method=2)
 
 
 def main():

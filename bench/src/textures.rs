@@ -28,7 +28,6 @@ use clap::Args as ClapArgs;
 use meshwiki_engine::lod::VertexOrder;
 use meshwiki_engine::lod::atlas::{AtlasCodec, encode_jpeg};
 use meshwiki_engine::lod::build::{BuildOptions, BuildReport, TextureBytes, TextureReport};
-use meshwiki_engine::lod::webp_match;
 use meshwiki_engine::mesh::{self, MeshSink, Relief};
 use meshwiki_engine::progress::NoProgress;
 
@@ -354,10 +353,7 @@ fn throughput(args: &Args, scan: &Source, dir: &Path) -> Result<()> {
                     "  atlas codec: WebP at quality {o:+.1} from each fragment's, the least \
                      offset at which {} sampled atlases have JPEG's error ({:.0} against {:.0}): \
                      {:.2} MB there against JPEG's {:.2} MB ({:.2}x)",
-                    webp_match::sample_indices(
-                        t.featured.fragments as usize + t.plain.fragments as usize
-                    )
-                    .len(),
+                    m.samples,
                     m.webp_error,
                     m.jpeg_error,
                     m.webp_bytes as f64 / 1e6,

@@ -212,7 +212,7 @@ fn fragment_quality_follows_feature_density() {
         let img = p.image.as_deref().expect("every patch has an atlas");
         mesh::Texture::decode(img).expect("the atlas is an image");
         let blob = lod.blob(node).expect("a blob");
-        assert!(lod::codec::image_is_webp(blob) && lod::atlas::is_webp(img));
+        assert!(lod::codec::image_is_webp(blob) && mesh::is_webp(img));
         let stored = lod::codec::blob_bytes(blob).expect("frames").0.image;
         assert_eq!(stored, img.len());
         bytes += stored as u64;

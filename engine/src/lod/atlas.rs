@@ -35,7 +35,9 @@
 //! (normal maps: also a few texels a triangle edge, `BuildOptions::normal_map_density`).
 
 use super::nearest::{Hit, Nearest};
-use crate::mesh::{SourceTexture, Texture, TexturedFace, Wrap, encode_rgba, srgb_to_linear};
+use crate::mesh::{
+    SourceTexture, Texture, TexturedFace, Wrap, encode_rgba, is_webp, srgb_to_linear,
+};
 use glam::{Vec2, Vec3};
 use rustc_hash::FxHashMap as HashMap;
 
@@ -1156,11 +1158,6 @@ pub fn header_len(image: &[u8]) -> usize {
 /// RIFF header (12 bytes) and the first chunk's header (8) of a WebP file.
 const WEBP_HEADER: usize = 20;
 
-/// Whether `bytes` is a WebP file (RIFF container of form `WEBP`).
-pub fn is_webp(bytes: &[u8]) -> bool {
-    bytes.len() >= 12 && &bytes[..4] == b"RIFF" && &bytes[8..12] == b"WEBP"
-}
-
 /// libwebp's effort (`method`, 0–6) for the atlases: 2 takes about half the time of the
 /// default 4 for 5–10% more bytes at equal error (`scripts/atlas-codecs.py` with each), and
 /// the atlases' encoding is a share of a textured build's time, which issue 11 bounds.
@@ -1170,11 +1167,7 @@ pub const WEBP_METHOD: i32 = 2;
 /// [`WEBP_METHOD`]; empty where libwebp refuses it (a side over 16383 texels: atlases are at
 /// most [`MAX_SIDE`]).
 pub fn encode_webp(image: &Texture, quality: f32) -> Vec<u8> {
-    let rgb: Vec<u8> = image
-        .texels()
-        .iter()
-        .flat_map(|t| [t[0], t[1], t[2]])
-        .collect();
+    let rgb = rgb_bytes(image);
     let Ok(mut config) = webp::WebPConfig::new() else {
         return Vec::new();
     };
@@ -1188,12 +1181,17 @@ pub fn encode_webp(image: &Texture, quality: f32) -> Vec<u8> {
     }
 }
 
-fn jpeg(image: &Texture, quality: u8, sampling: jpeg_encoder::SamplingFactor) -> Vec<u8> {
-    let rgb: Vec<u8> = image
+/// The texels' RGB bytes, row by row (what both encoders take).
+fn rgb_bytes(image: &Texture) -> Vec<u8> {
+    image
         .texels()
         .iter()
         .flat_map(|t| [t[0], t[1], t[2]])
-        .collect();
+        .collect()
+}
+
+fn jpeg(image: &Texture, quality: u8, sampling: jpeg_encoder::SamplingFactor) -> Vec<u8> {
+    let rgb = rgb_bytes(image);
     let mut out = Vec::new();
     let mut encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
     encoder.set_sampling_factor(sampling);

@@ -1192,22 +1192,20 @@ impl<'a> Builder<'a> {
         for k in webp_match::sample_indices(textured.len()) {
             let i = textured[k];
             if let (Some(atlas), Some((q, _))) = (self.load_atlas(i as u32, true)?, quality[i])
-                && let Some(image) = &atlas.image
+                && let Some(image) = atlas.image
             {
                 let (w, h) = (image.width() as usize, image.height() as usize);
                 let covered = fragment_quality::covered_or_found(&atlas.covered, w, h, &atlas.uvs)
                     .into_owned();
-                picked.push((atlas, covered, q));
+                picked.push((image, covered, q));
             }
         }
         let samples: Vec<webp_match::Sample> = picked
             .iter()
-            .filter_map(|(atlas, covered, q)| {
-                Some(webp_match::Sample {
-                    image: atlas.image.as_ref()?,
-                    covered,
-                    quality: *q,
-                })
+            .map(|(image, covered, q)| webp_match::Sample {
+                image,
+                covered,
+                quality: *q,
             })
             .collect();
         Ok(webp_match::match_jpeg(&samples))

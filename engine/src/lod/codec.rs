@@ -989,7 +989,7 @@ fn encode_split(
 /// and quantisation tables where every one has the standard ones ([`super::jpegtables`]);
 /// whole otherwise. An image is at most [`super::atlas::MAX_SIDE`]² texels: far below 4 GiB.
 fn push_sections(blob: &mut Vec<u8>, image: Option<&[u8]>, normals: Option<&[u8]>) {
-    let webp = image.is_some_and(super::atlas::is_webp);
+    let webp = image.is_some_and(crate::mesh::is_webp);
     // The sections the JPEG flags speak of.
     let jpegs = [image.filter(|_| !webp), normals];
     let huffman = jpegs.map(|i| i.and_then(jpegtables::strip_standard_huffman));
@@ -1756,7 +1756,7 @@ mod tests {
         // A WebP atlas is stored whole and flagged; the JPEG normal map beside it still goes
         // without its tables and headers, and both decode byte for byte.
         let webp = super::super::atlas::encode_webp(&texture, 85.0);
-        assert!(super::super::atlas::is_webp(&webp));
+        assert!(crate::mesh::is_webp(&webp));
         let both = with_images(&empty, Some(&webp), Some(&normal_jpeg)).expect("a blob");
         assert_eq!(
             both[5],

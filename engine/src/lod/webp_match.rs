@@ -45,6 +45,8 @@ pub struct Sample<'a> {
 pub struct Match {
     /// WebP quality minus JPEG quality (None: the build keeps JPEG).
     pub offset: Option<f32>,
+    /// Atlases sampled.
+    pub samples: usize,
     /// The samples' bytes as JPEG (as stored: without tables and headers) and as WebP at
     /// the offset found (at the top of the range where none was).
     pub jpeg_bytes: u64,
@@ -66,6 +68,17 @@ pub fn sample_indices(count: usize) -> Vec<usize> {
 
 /// The WebP quality offset that matches JPEG's error on `samples` ([module docs](self)).
 pub fn match_jpeg(samples: &[Sample]) -> Match {
+    let mut found = Match {
+        offset: None,
+        samples: samples.len(),
+        jpeg_bytes: 0,
+        webp_bytes: 0,
+        jpeg_error: 0.0,
+        webp_error: 0.0,
+    };
+    if samples.is_empty() {
+        return found;
+    }
     let jpeg: Vec<(u64, f64)> = samples
         .par_iter()
         .map(|s| {
@@ -77,8 +90,9 @@ pub fn match_jpeg(samples: &[Sample]) -> Match {
             (stored as u64, error)
         })
         .collect();
-    let jpeg_bytes = jpeg.iter().map(|j| j.0).sum();
-    let jpeg_error: f64 = jpeg.iter().map(|j| j.1).sum();
+    found.jpeg_bytes = jpeg.iter().map(|j| j.0).sum();
+    found.jpeg_error = jpeg.iter().map(|j| j.1).sum();
+    let jpeg_error = found.jpeg_error;
     let webp_at = |offset: f32| -> (u64, f64) {
         samples
             .par_iter()
@@ -90,14 +104,9 @@ pub fn match_jpeg(samples: &[Sample]) -> Match {
     };
     let (mut lo, mut hi) = OFFSET_RANGE;
     let mut best = webp_at(hi);
-    if samples.is_empty() || best.1 > jpeg_error {
-        return Match {
-            offset: None,
-            jpeg_bytes,
-            webp_bytes: best.0,
-            jpeg_error,
-            webp_error: best.1,
-        };
+    if best.1 > jpeg_error {
+        (found.webp_bytes, found.webp_error) = best;
+        return found;
     }
     // Where even the range's lowest quality reaches JPEG's error, that is the offset.
     let lowest = webp_at(lo);
@@ -115,13 +124,9 @@ pub fn match_jpeg(samples: &[Sample]) -> Match {
             lo = mid;
         }
     }
-    Match {
-        offset: (best.0 < jpeg_bytes).then_some(hi),
-        jpeg_bytes,
-        webp_bytes: best.0,
-        jpeg_error,
-        webp_error: best.1,
-    }
+    (found.webp_bytes, found.webp_error) = best;
+    found.offset = (best.0 < found.jpeg_bytes).then_some(hi);
+    found
 }
 
 /// Squared error (8-bit RGB) of `encoded` decoded against the sample's texels, over its chart
@@ -220,7 +225,8 @@ mod tests {
 
     #[test]
     fn no_samples_keep_jpeg() {
-        assert_eq!(match_jpeg(&[]).offset, None);
+        let none = match_jpeg(&[]);
+        assert_eq!((none.offset, none.samples, none.webp_bytes), (None, 0, 0));
         assert!(sample_indices(0).is_empty());
         assert_eq!(sample_indices(3), vec![0, 1, 2]);
         let many = sample_indices(1000);

@@ -35,7 +35,9 @@ pub use sink::{
     check_textured_faces,
 };
 pub use synth::{Relief, generate_relief, write_relief_ply};
-pub use texture::{SourceTexture, Texture, Wrap, encode_rgba, linear_to_srgb, srgb_to_linear};
+pub use texture::{
+    SourceTexture, Texture, Wrap, encode_rgba, is_webp, linear_to_srgb, srgb_to_linear,
+};
 
 use crate::progress::Progress;
 use std::path::Path;

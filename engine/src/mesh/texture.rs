@@ -13,6 +13,11 @@ const MAX_SIDE: u32 = 32768;
 /// other formats decode under.
 const MAX_DECODED_BYTES: u64 = 512 << 20;
 
+/// Whether `bytes` is a WebP file (RIFF container of form `WEBP`).
+pub fn is_webp(bytes: &[u8]) -> bool {
+    bytes.len() >= 12 && &bytes[..4] == b"RIFF" && &bytes[8..12] == b"WEBP"
+}
+
 /// How texture coordinates outside [0, 1] map onto the image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Wrap {
@@ -146,7 +151,7 @@ pub fn encode_rgba(l: [f32; 4]) -> [u8; 4] {
 impl Texture {
     /// Decodes an image in any enabled format (PNG, JPEG, WebP).
     pub fn decode(bytes: &[u8]) -> Result<Texture, String> {
-        if crate::lod::atlas::is_webp(bytes) {
+        if is_webp(bytes) {
             return Self::decode_webp(bytes);
         }
         let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
