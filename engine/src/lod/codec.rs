@@ -304,7 +304,13 @@ fn split_wedges(
     Vec<u32>,
     Vec<[u16; 2]>,
 ) {
-    let mut map: HashMap<(u32, [u16; 2]), u32> = HashMap::default();
+    // Each vertex's wedges as a chain: its latest wedge, and per wedge the one before it (a
+    // vertex has one wedge but on a seam: a walk of one or two, where a hash map of
+    // (vertex, coordinate) costs a hash a corner).
+    const NONE: u32 = u32::MAX;
+    let vertices = patch.indices.iter().max().map_or(0, |&m| m as usize + 1);
+    let mut latest = vec![NONE; vertices];
+    let mut before: Vec<u32> = Vec::new();
     let mut from: Vec<u32> = Vec::new();
     let mut uvs: Vec<[u16; 2]> = Vec::new();
     let indices: Vec<u32> = patch
@@ -313,11 +319,18 @@ fn split_wedges(
         .enumerate()
         .map(|(c, &v)| {
             let q = quantize_uv(corner_uvs.get(c).copied().unwrap_or([0.0; 2]));
-            *map.entry((v, q)).or_insert_with(|| {
+            let mut w = latest[v as usize];
+            while w != NONE && uvs[w as usize] != q {
+                w = before[w as usize];
+            }
+            if w == NONE {
+                w = from.len() as u32;
                 from.push(v);
                 uvs.push(q);
-                (from.len() - 1) as u32
-            })
+                before.push(latest[v as usize]);
+                latest[v as usize] = w;
+            }
+            w
         })
         .collect();
     let pick = |v: &u32| *v as usize;

@@ -305,6 +305,8 @@ impl Texture {
 fn axis(t: f32, size: u32, wrap: Wrap) -> (usize, usize, f32) {
     let t = if t.is_finite() { t as f64 } else { 0.0 };
     let t = match wrap {
+        // Coordinates are mostly within [0, 1) already: `floor` is a libm call here.
+        Wrap::Repeat if (0.0..1.0).contains(&t) => t,
         Wrap::Repeat => t - t.floor(),
         Wrap::Clamp => t.clamp(0.0, 1.0),
         Wrap::Mirror => {
@@ -314,9 +316,9 @@ fn axis(t: f32, size: u32, wrap: Wrap) -> (usize, usize, f32) {
     };
     let n = size as i64;
     let x = t * size as f64 - 0.5;
-    let x0 = x.floor();
-    let f = (x - x0) as f32;
-    let x0 = x0 as i64;
+    // `floor(x)` for x >= -0.5 (t is in [0, 1] after the wrap): truncation of x + 1, less 1.
+    let x0 = (x + 1.0) as i64 - 1;
+    let f = (x - x0 as f64) as f32;
     let fix = |i: i64| -> usize {
         match wrap {
             // After the wrap above, i is within -1..=n: one step back in, not the integer
