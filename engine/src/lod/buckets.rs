@@ -4,6 +4,7 @@
 //! into leaf patches independently and in parallel (the system paper's over-partitioning into
 //! voxels, §3.1.1, with balanced cells instead of a regular grid).
 
+use crate::mesh::TexturedFace;
 use glam::Vec3;
 use std::fs::File;
 use std::io::{self, BufReader, BufWriter, Read, Write};
@@ -120,15 +121,16 @@ pub struct Bucket {
 }
 
 /// Streams `faces_path` (u32 triples) and writes every face to its centroid's bucket file;
-/// `indexed`: each face followed by its index in the face file (textured scans look up their
-/// texture coordinates by it).
+/// with `uvs_path` (a textured scan: [`TexturedFace`] records in face order), each face is
+/// followed by its texture coordinates, so a bucket carries what its leaves bake from and no
+/// array of every face's coordinates is held while the leaves are built.
 pub fn write_buckets(
     faces_path: &Path,
+    uvs_path: Option<&Path>,
     positions: &[[f32; 3]],
     split: &KdSplit,
     dir: &Path,
     buffer_budget: usize,
-    indexed: bool,
 ) -> io::Result<Vec<Bucket>> {
     let n = split.bucket_count();
     let capacity = (buffer_budget / n.max(1)).clamp(4096, 1 << 16);
@@ -140,8 +142,12 @@ pub fn write_buckets(
         buckets.push(Bucket { path, triangles: 0 });
     }
     let mut reader = BufReader::with_capacity(1 << 20, File::open(faces_path)?);
+    let mut uvs_reader = match uvs_path {
+        Some(path) => Some(BufReader::with_capacity(1 << 20, File::open(path)?)),
+        None => None,
+    };
     let mut chunk = vec![[0u32; 3]; 1 << 16];
-    let mut face_index = 0u32;
+    let mut uvs = vec![TexturedFace::NONE; if uvs_path.is_some() { chunk.len() } else { 0 }];
     loop {
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut chunk);
         let got = read_full(&mut reader, bytes)?;
@@ -149,7 +155,17 @@ pub fn write_buckets(
         if faces.is_empty() {
             break;
         }
-        for f in faces {
+        if let Some(r) = uvs_reader.as_mut() {
+            let want = faces.len() * std::mem::size_of::<TexturedFace>();
+            let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut uvs[..faces.len()]);
+            if read_full(r, bytes)? < want {
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    "fewer texture coordinates than faces in the scratch files",
+                ));
+            }
+        }
+        for (i, f) in faces.iter().enumerate() {
             let c = f
                 .iter()
                 .map(|&i| Vec3::from(positions[i as usize]))
@@ -157,10 +173,9 @@ pub fn write_buckets(
                 / 3.0;
             let b = split.bucket_of(c) as usize;
             writers[b].write_all(bytemuck::bytes_of(f))?;
-            if indexed {
-                writers[b].write_all(&face_index.to_ne_bytes())?;
+            if let Some(uv) = uvs.get(i) {
+                writers[b].write_all(bytemuck::bytes_of(uv))?;
             }
-            face_index = face_index.wrapping_add(1);
             buckets[b].triangles += 1;
         }
         if got < std::mem::size_of_val(chunk.as_slice()) {
@@ -185,25 +200,92 @@ fn read_full(reader: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
     Ok(got)
 }
 
-/// Loads a bucket's faces, and their face-file indices if it was written `indexed`.
-pub fn read_bucket(bucket: &Bucket, indexed: bool) -> io::Result<(Vec<[u32; 3]>, Vec<u32>)> {
+/// Loads a bucket's faces, and their texture coordinates if it was written `textured`
+/// ([`write_buckets`]).
+pub fn read_bucket(
+    bucket: &Bucket,
+    textured: bool,
+) -> io::Result<(Vec<[u32; 3]>, Vec<TexturedFace>)> {
     let bytes = std::fs::read(&bucket.path)?;
-    if !indexed {
+    if !textured {
         return Ok((
             bytemuck::pod_collect_to_vec(&bytes[..bytes.len() / 12 * 12]),
             Vec::new(),
         ));
     }
-    let records: Vec<[u32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..bytes.len() / 16 * 16]);
+    const UV: usize = std::mem::size_of::<TexturedFace>();
+    let records = bytes.chunks_exact(12 + UV);
     Ok((
-        records.iter().map(|r| [r[0], r[1], r[2]]).collect(),
-        records.iter().map(|r| r[3]).collect(),
+        records
+            .clone()
+            .map(|r| bytemuck::pod_read_unaligned(&r[..12]))
+            .collect(),
+        records
+            .map(|r| bytemuck::pod_read_unaligned(&r[12..]))
+            .collect(),
     ))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn buckets_carry_each_face_with_its_texture_coordinates() {
+        let dir = std::env::temp_dir().join(format!("mw-buckets-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        // A strip of triangles along x, each face's coordinates naming the face.
+        let n = 5000u32;
+        let positions: Vec<[f32; 3]> = (0..n + 2)
+            .map(|i| [i as f32, (i % 2) as f32, 0.0])
+            .collect();
+        let faces: Vec<[u32; 3]> = (0..n).map(|i| [i, i + 1, i + 2]).collect();
+        let uvs: Vec<TexturedFace> = (0..n)
+            .map(|i| TexturedFace {
+                uv: [[i as f32, 0.5], [i as f32, 1.5], [i as f32, 2.5]],
+                texture: i % 3,
+            })
+            .collect();
+        let (faces_path, uvs_path) = (dir.join("faces.bin"), dir.join("uvs.bin"));
+        std::fs::write(&faces_path, bytemuck::cast_slice(&faces)).expect("write");
+        std::fs::write(&uvs_path, bytemuck::cast_slice(&uvs)).expect("write");
+        let mut sample = positions.clone();
+        let split = KdSplit::build(&mut sample, 1.0, 700);
+        assert!(split.bucket_count() > 4);
+        let buckets = write_buckets(
+            &faces_path,
+            Some(&uvs_path),
+            &positions,
+            &split,
+            &dir,
+            1 << 20,
+        )
+        .expect("buckets");
+        let mut seen = 0;
+        for bucket in &buckets {
+            let (got, got_uvs) = read_bucket(bucket, true).expect("read");
+            assert_eq!(got.len(), got_uvs.len());
+            for (f, uv) in got.iter().zip(&got_uvs) {
+                assert_eq!(uv, &uvs[f[0] as usize]);
+            }
+            seen += got.len();
+        }
+        assert_eq!(seen, n as usize);
+        // Fewer coordinates than faces is an error, not a misaligned bucket.
+        std::fs::write(&uvs_path, bytemuck::cast_slice(&uvs[..10])).expect("write");
+        assert!(
+            write_buckets(
+                &faces_path,
+                Some(&uvs_path),
+                &positions,
+                &split,
+                &dir,
+                1 << 20
+            )
+            .is_err()
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn kd_leaves_balance_the_sample() {

@@ -504,7 +504,7 @@ impl<'a> Builder<'a> {
             raw: ScratchFile::create(&scratch.join("patches.raw"))?,
             blobs: ScratchFile::create(&scratch.join("patches.blobs"))?,
             atlases: ScratchFile::create(&scratch.join("patches.atlases"))?,
-            textured: ingested.face_uvs.is_some(),
+            textured: ingested.face_uvs_path.is_some(),
             normal_map_bytes: NormalMapBytes::default(),
             scratch: scratch.to_path_buf(),
             grid,
@@ -756,13 +756,16 @@ impl<'a> Builder<'a> {
         let kd = KdSplit::build(&mut ingested.sample, per_sample, bucket_max);
         let buckets = write_buckets(
             &ingested.faces_path,
+            ingested.face_uvs_path.as_deref(),
             ingested.positions.as_slice(),
             &kd,
             scratch,
             self.options.memory_budget / 16,
-            self.textured,
         )?;
         let _ = std::fs::remove_file(&ingested.faces_path);
+        if let Some(path) = &ingested.face_uvs_path {
+            let _ = std::fs::remove_file(path);
+        }
         ingested.positions.release();
         self.progress.stage("partitioning", buckets.len() as u64);
         let segments = Collector::new(
@@ -776,7 +779,6 @@ impl<'a> Builder<'a> {
         let positions = arrays.positions.as_slice();
         let normals = arrays.normals.as_slice();
         let colors = arrays.colors.as_ref().map(|c| c.as_slice());
-        let face_uvs = arrays.face_uvs.as_ref().map(|f| f.as_slice());
         let textures = &arrays.textures[..];
         let max = self.options.max_patch_triangles;
         let this = &*self;
@@ -792,7 +794,7 @@ impl<'a> Builder<'a> {
                     if this.progress.cancelled() {
                         return Err(BuildError::Cancelled);
                     }
-                    let (faces, face_ids) = read_bucket(bucket, this.textured)?;
+                    let (faces, face_uvs) = read_bucket(bucket, this.textured)?;
                     let _ = std::fs::remove_file(&bucket.path);
                     let mesh = bucket_mesh(&faces, positions, normals, colors);
                     drop(faces);
@@ -807,13 +809,12 @@ impl<'a> Builder<'a> {
                     let stored = patches
                         .iter()
                         .map(|(p, tris)| {
-                            let texture = face_uvs.map(|uvs| {
+                            let texture = this.textured.then(|| {
                                 let faces: Vec<TexturedFace> = tris
                                     .iter()
                                     .map(|&t| {
-                                        face_ids
+                                        face_uvs
                                             .get(t as usize)
-                                            .and_then(|&f| uvs.get(f as usize))
                                             .copied()
                                             .unwrap_or(TexturedFace::NONE)
                                     })

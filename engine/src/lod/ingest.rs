@@ -24,10 +24,11 @@ pub struct Ingested {
     pub normals: SpillVec<[f32; 3]>,
     pub faces_path: PathBuf,
     pub triangle_count: u64,
-    /// The scan's textures, and every face's texture coordinates (face order), when the
-    /// reader handed over textures.
+    /// The scan's textures, and a file of every face's texture coordinates
+    /// ([`TexturedFace`] records in face order), when the reader handed over textures: read
+    /// once, in order, by the partition, never held in memory (28 bytes a face).
     pub textures: Vec<SourceTexture>,
-    pub face_uvs: Option<SpillVec<TexturedFace>>,
+    pub face_uvs_path: Option<PathBuf>,
     pub bbox: (Vec3, Vec3),
     pub sample: Vec<[f32; 3]>,
     pub mean_edge: f64,
@@ -42,7 +43,9 @@ pub struct Ingest {
     faces: BufWriter<File>,
     faces_path: PathBuf,
     textures: Vec<SourceTexture>,
-    face_uvs: Option<SpillVec<TexturedFace>>,
+    face_uvs: Option<BufWriter<File>>,
+    /// Faces whose coordinates `face_uvs` holds.
+    textured_faces: u64,
     memory_limit: usize,
     triangle_count: u64,
     lo: Vec3,
@@ -72,6 +75,7 @@ impl Ingest {
             faces_path,
             textures: Vec::new(),
             face_uvs: None,
+            textured_faces: 0,
             memory_limit,
             triangle_count: 0,
             lo: Vec3::splat(f32::MAX),
@@ -85,6 +89,10 @@ impl Ingest {
         })
     }
 
+    fn uvs_path(&self) -> PathBuf {
+        self.faces_path.with_file_name("face_uvs.bin")
+    }
+
     fn next_random(&mut self) -> u64 {
         // xorshift64*: deterministic, so builds are reproducible.
         self.rng ^= self.rng >> 12;
@@ -96,6 +104,9 @@ impl Ingest {
     /// Normalises the normals and closes the face file.
     pub fn finish(mut self) -> std::io::Result<Ingested> {
         self.faces.flush()?;
+        if let Some(uvs) = self.face_uvs.as_mut() {
+            uvs.flush()?;
+        }
         if !self.normals_from_input {
             for n in self.normals.as_mut_slice() {
                 let v = Vec3::from(*n);
@@ -112,14 +123,15 @@ impl Ingest {
         } else {
             (self.lo, self.hi)
         };
+        let face_uvs_path = self.face_uvs.is_some().then(|| self.uvs_path());
         Ok(Ingested {
             positions: self.positions,
             colors: self.colors,
             normals: self.normals,
             faces_path: self.faces_path,
             triangle_count: self.triangle_count,
+            face_uvs_path,
             textures: self.textures,
-            face_uvs: self.face_uvs,
             bbox,
             sample: self.sample,
             mean_edge: if self.edge_count > 0 {
@@ -197,7 +209,8 @@ impl MeshSink for Ingest {
         // Textures stay decoded for the leaf stage: they must fit the memory budget.
         if decoded > (self.memory_limit as u64) * 2 {
             return Err(ImportError::sink(format!(
-                "the scan's textures take {} MiB decoded, more than the build's memory                  budget allows; raise the budget (--memory-budget)",
+                "the scan's textures take {} MiB decoded, more than the build's memory budget \
+                 allows; raise the budget (--memory-budget)",
                 decoded >> 20
             )));
         }
@@ -208,10 +221,8 @@ impl MeshSink for Ingest {
         }
         self.textures.push(texture);
         if self.face_uvs.is_none() {
-            self.face_uvs = Some(SpillVec::new(
-                self.faces_path.with_file_name("face_uvs.bin"),
-                self.memory_limit,
-            ));
+            let file = File::create(self.uvs_path()).map_err(io_error)?;
+            self.face_uvs = Some(BufWriter::with_capacity(1 << 20, file));
         }
         Ok(())
     }
@@ -226,16 +237,16 @@ impl MeshSink for Ingest {
         self.triangles(triangles)?;
         if let Some(uvs) = self.face_uvs.as_mut() {
             // `triangles` succeeded for all of them: faces and coordinates stay aligned.
-            debug_assert_eq!(uvs.len() as u64, before);
-            uvs.extend_from_slice(faces).map_err(io_error)?;
+            debug_assert_eq!(self.textured_faces, before);
+            uvs.write_all(bytemuck::cast_slice(faces))
+                .map_err(io_error)?;
+            self.textured_faces += faces.len() as u64;
         }
         Ok(())
     }
 
     fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
-        if let Some(uvs) = self.face_uvs.as_mut()
-            && uvs.len() as u64 != self.triangle_count
-        {
+        if self.face_uvs.is_some() && self.textured_faces != self.triangle_count {
             return Err(ImportError::sink(
                 "an untextured triangle in a textured scan",
             ));
