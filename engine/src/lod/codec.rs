@@ -308,8 +308,7 @@ fn split_wedges(
     // vertex has one wedge but on a seam: a walk of one or two, where a hash map of
     // (vertex, coordinate) costs a hash a corner).
     const NONE: u32 = u32::MAX;
-    let vertices = patch.indices.iter().max().map_or(0, |&m| m as usize + 1);
-    let mut latest = vec![NONE; vertices];
+    let mut latest = vec![NONE; patch.grid_positions.len()];
     let mut before: Vec<u32> = Vec::new();
     let mut from: Vec<u32> = Vec::new();
     let mut uvs: Vec<[u16; 2]> = Vec::new();
@@ -319,7 +318,8 @@ fn split_wedges(
         .enumerate()
         .map(|(c, &v)| {
             let q = quantize_uv(corner_uvs.get(c).copied().unwrap_or([0.0; 2]));
-            let mut w = latest[v as usize];
+            let head = latest.get(v as usize).copied().unwrap_or(NONE);
+            let mut w = head;
             while w != NONE && uvs[w as usize] != q {
                 w = before[w as usize];
             }
@@ -327,8 +327,10 @@ fn split_wedges(
                 w = from.len() as u32;
                 from.push(v);
                 uvs.push(q);
-                before.push(latest[v as usize]);
-                latest[v as usize] = w;
+                before.push(head);
+                if let Some(l) = latest.get_mut(v as usize) {
+                    *l = w;
+                }
             }
             w
         })

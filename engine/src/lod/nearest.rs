@@ -219,19 +219,19 @@ impl Nearest {
             })
         });
         let Some(t) = hint else {
-            self.descend(&[Child::inner(0)], &query, &mut best);
+            self.descend(Child::inner(0), &query, &mut best);
             return best.hit;
         };
         let slot = &self.slots[self.slot_of[t as usize] as usize];
         self.consider(slot, query.p, &mut best);
         let (mut node, mut side) = self.leaf_of[t as usize];
         let leaf = self.nodes[node as usize].child[side as usize];
-        self.descend(&[leaf], &query, &mut best);
+        self.descend(leaf, &query, &mut best);
         loop {
             let n = &self.nodes[node as usize];
             let other = 1 - side as usize;
             if box_distance_sq(query.p, n.lo[other], n.hi[other]) < best.d {
-                self.descend(&[n.child[other]], &query, &mut best);
+                self.descend(n.child[other], &query, &mut best);
             }
             if node == 0 {
                 break;
@@ -256,13 +256,13 @@ impl Nearest {
         }
     }
 
-    /// Searches the subtrees `roots` depth-first, the nearer child first, pruning subtrees no
+    /// Searches the subtree `root` depth-first, the nearer child first, pruning subtrees no
     /// nearer than the best so far. Each entry of the walk carries its box distance, so a
     /// node is read only to go below it.
-    fn descend(&self, roots: &[Child], q: &Query, best: &mut Best) {
-        // The walk holds about one entry a level of a median-split tree: on the stack, with
-        // no allocation per query.
-        let mut stack: SmallVec<[(Child, f32); 64]> = roots.iter().map(|&c| (c, 0.0)).collect();
+    fn descend(&self, root: Child, q: &Query, best: &mut Best) {
+        // The walk holds about one entry a level: on the stack, with no allocation per query.
+        let mut stack: SmallVec<[(Child, f32); 64]> = SmallVec::new();
+        stack.push((root, 0.0));
         while let Some((c, d)) = stack.pop() {
             if d >= best.d {
                 continue;
