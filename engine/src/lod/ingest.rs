@@ -1,5 +1,6 @@
 //! First build pass: a [`MeshSink`] that takes the streamed scan apart into flat vertex arrays
-//! (spilling to disk beyond the memory budget) and a face file, accumulating what later passes
+//! (spilling to disk beyond the memory budget), a face file and, for a textured scan, a file of
+//! the faces' texture coordinates in the same order, accumulating what later passes
 //! need: bounds, a reservoir sample of positions for the spatial split, area-weighted vertex
 //! normals when the scan has none, and the mean edge length for the quantisation step.
 
@@ -44,8 +45,6 @@ pub struct Ingest {
     faces_path: PathBuf,
     textures: Vec<SourceTexture>,
     face_uvs: Option<BufWriter<File>>,
-    /// Faces whose coordinates `face_uvs` holds.
-    textured_faces: u64,
     memory_limit: usize,
     triangle_count: u64,
     lo: Vec3,
@@ -75,7 +74,6 @@ impl Ingest {
             faces_path,
             textures: Vec::new(),
             face_uvs: None,
-            textured_faces: 0,
             memory_limit,
             triangle_count: 0,
             lo: Vec3::splat(f32::MAX),
@@ -233,24 +231,33 @@ impl MeshSink for Ingest {
         faces: &[TexturedFace],
     ) -> Result<(), ImportError> {
         check_textured_faces(triangles, faces)?;
-        let before = self.triangle_count;
-        self.triangles(triangles)?;
+        self.push_triangles(triangles)?;
         if let Some(uvs) = self.face_uvs.as_mut() {
-            // `triangles` succeeded for all of them: faces and coordinates stay aligned.
-            debug_assert_eq!(self.textured_faces, before);
+            // `push_triangles` took all of them: faces and coordinates stay aligned.
             uvs.write_all(bytemuck::cast_slice(faces))
                 .map_err(io_error)?;
-            self.textured_faces += faces.len() as u64;
         }
         Ok(())
     }
 
+    /// In a textured scan, triangles delivered without coordinates get
+    /// [`TexturedFace::NONE`], as [`crate::mesh::TexturedMesh`] gives them.
     fn triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
-        if self.face_uvs.is_some() && self.textured_faces != self.triangle_count {
-            return Err(ImportError::sink(
-                "an untextured triangle in a textured scan",
-            ));
+        self.push_triangles(triangles)?;
+        if let Some(uvs) = self.face_uvs.as_mut() {
+            for _ in triangles {
+                uvs.write_all(bytemuck::bytes_of(&TexturedFace::NONE))
+                    .map_err(io_error)?;
+            }
         }
+        Ok(())
+    }
+}
+
+impl Ingest {
+    /// Takes a batch of triangles into the face file, the normals and the edge statistics;
+    /// nothing is written where one names a vertex not yet delivered.
+    fn push_triangles(&mut self, triangles: &[[u32; 3]]) -> Result<(), ImportError> {
         let positions = self.positions.as_slice();
         let count = positions.len();
         let mut edge_sum = 0.0f64;
@@ -297,5 +304,74 @@ impl MeshSink for Ingest {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{Texture, Wrap};
+
+    #[test]
+    fn a_textured_scans_coordinates_follow_its_faces_with_none_where_a_batch_had_none() {
+        let dir = std::env::temp_dir().join(format!("mw-ingest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let mut ingest = Ingest::new(&dir, 1 << 20).expect("ingest");
+        ingest
+            .begin(&SourceInfo {
+                vertex_count: Some(4),
+                triangle_count_hint: Some(3),
+                has_colors: false,
+                has_normals: false,
+            })
+            .expect("begin");
+        let image = Texture::from_texels(2, 2, vec![[200; 4]; 4]).expect("an image");
+        ingest
+            .texture(SourceTexture {
+                image: std::sync::Arc::new(image),
+                wrap_s: Wrap::Repeat,
+                wrap_t: Wrap::Repeat,
+            })
+            .expect("a texture");
+        let positions = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        ingest
+            .vertices(VertexBatch {
+                positions: &positions,
+                colors: None,
+                normals: None,
+            })
+            .expect("vertices");
+        let face = TexturedFace {
+            uv: [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]],
+            texture: 0,
+        };
+        ingest
+            .textured_triangles(&[[0, 1, 2]], &[face])
+            .expect("textured");
+        // Untextured triangles, in the middle and last: coordinates NONE, no error.
+        ingest.triangles(&[[1, 3, 2]]).expect("untextured");
+        ingest
+            .textured_triangles(&[[0, 1, 3]], &[face])
+            .expect("textured");
+        ingest.triangles(&[[0, 3, 2]]).expect("untextured, last");
+        // A triangle naming an undelivered vertex writes neither a face nor coordinates.
+        assert!(ingest.textured_triangles(&[[0, 1, 9]], &[face]).is_err());
+        let done = ingest.finish().expect("finish");
+        let path = done.face_uvs_path.as_ref().expect("a textured scan");
+        let uvs: Vec<TexturedFace> =
+            bytemuck::pod_collect_to_vec(&std::fs::read(path).expect("the coordinates"));
+        assert_eq!(done.triangle_count, 4);
+        assert_eq!(
+            uvs,
+            vec![face, TexturedFace::NONE, face, TexturedFace::NONE]
+        );
+        let faces = std::fs::read(&done.faces_path).expect("the faces");
+        assert_eq!(faces.len(), 4 * 12);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
