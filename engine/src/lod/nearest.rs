@@ -121,17 +121,13 @@ impl Nearest {
         let mut nodes = Vec::with_capacity(tris.len() / LEAF + 1);
         let mut order: Vec<u32> = Vec::new();
         if !boxes.is_empty() {
-            let all = boxes.iter().fold(
-                (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-                |(lo, hi), b| (lo.min(b.0), hi.max(b.1)),
-            );
+            let all = union(boxes.iter().copied());
             let keys = morton_keys(&boxes, all);
             order = keys.iter().map(|&k| k as u32).collect();
             if order.len() <= LEAF {
-                let empty = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
                 nodes.push(Node {
-                    lo: [all.0, empty.0],
-                    hi: [all.1, empty.1],
+                    lo: [all.0, EMPTY_BOX.0],
+                    hi: [all.1, EMPTY_BOX.1],
                     child: [Child::leaf(0, order.len() as u32), Child::leaf(0, 0)],
                 });
             } else {
@@ -367,18 +363,16 @@ impl Tree<'_> {
             hi: [Vec3::ZERO; 2],
             child: [empty; 2],
         });
-        let mut all = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        let mut all = EMPTY_BOX;
         for (side, (a, b)) in [(from, from + mid), (from + mid, to)]
             .into_iter()
             .enumerate()
         {
             let (child, bounds) = if b - a <= LEAF {
-                let bounds = self.keys[a..b].iter().fold(
-                    (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-                    |(lo, hi), &k| {
-                        let t = self.boxes[k as u32 as usize];
-                        (lo.min(t.0), hi.max(t.1))
-                    },
+                let bounds = union(
+                    self.keys[a..b]
+                        .iter()
+                        .map(|&k| self.boxes[k as u32 as usize]),
                 );
                 (Child::leaf(a as u32, (b - a) as u32), bounds)
             } else {
@@ -389,10 +383,20 @@ impl Tree<'_> {
             node.lo[side] = bounds.0;
             node.hi[side] = bounds.1;
             node.child[side] = child;
-            all = (all.0.min(bounds.0), all.1.max(bounds.1));
+            all = union([all, bounds]);
         }
         (id, all)
     }
+}
+
+/// The box no point is in (the union's identity; at infinite distance from every point).
+const EMPTY_BOX: (Vec3, Vec3) = (Vec3::MAX, Vec3::MIN);
+
+/// The smallest box holding `boxes`.
+fn union(boxes: impl IntoIterator<Item = (Vec3, Vec3)>) -> (Vec3, Vec3) {
+    boxes
+        .into_iter()
+        .fold(EMPTY_BOX, |(lo, hi), b| (lo.min(b.0), hi.max(b.1)))
 }
 
 #[inline]
