@@ -318,7 +318,7 @@ pub fn run(args: Args) -> Result<()> {
         }]
     };
     let mut runs = Vec::new();
-    let mut worst: Vec<Option<(usize, f64, f64)>> = vec![None; TOOLS.len()];
+    let mut worst: Vec<Option<Worst>> = vec![None; TOOLS.len()];
     for (k, setting) in settings.iter().enumerate() {
         if args.sweep {
             println!("setting {} of {}", k + 1, settings.len());
@@ -329,9 +329,20 @@ pub fn run(args: Args) -> Result<()> {
         );
         for (t, (name, _)) in TOOLS.iter().enumerate() {
             let m = summary[*name]["mean_error"].as_f64().unwrap_or(f64::NAN);
-            let p90 = summary[*name]["p90_error"].as_f64().unwrap_or(f64::NAN);
-            if worst[t].is_none_or(|(_, wm, _)| m > wm) {
-                worst[t] = Some((k, m, p90));
+            let figure = |key: &str| summary[*name][key].as_f64().unwrap_or(f64::NAN);
+            let (p90, missed, extra) = (
+                figure("p90_error"),
+                figure("mean_missed"),
+                figure("mean_extra"),
+            );
+            if worst[t].is_none_or(|w| m > w.mean) {
+                worst[t] = Some(Worst {
+                    setting: k,
+                    mean: m,
+                    p90,
+                    missed,
+                    extra,
+                });
             }
         }
         runs.push(json!({
@@ -348,11 +359,19 @@ pub fn run(args: Args) -> Result<()> {
     if args.sweep {
         println!("worst setting per tool (by mean error):");
         for (t, (_, label)) in TOOLS.iter().enumerate() {
-            if let Some((k, m, p90)) = worst[t] {
+            if let Some(Worst {
+                setting: k,
+                mean: m,
+                p90,
+                missed,
+                extra,
+            }) = worst[t]
+            {
                 let s = &settings[k];
                 println!(
                     "  {label:<20} setting {}: {}x{}, band {} px, jitter {} px, markup {}+{} \
-                     strokes ×{} long, reach {} px: mean {:.2}%, p90 {:.2}%",
+                     strokes ×{} long, reach {} px: mean {:.2}% (missed {:.2}%, extra {:.2}%), \
+                     p90 {:.2}%",
                     k + 1,
                     s.width,
                     s.height,
@@ -363,6 +382,8 @@ pub fn run(args: Args) -> Result<()> {
                     s.user.stroke_length,
                     s.user.bg_reach,
                     m * 100.0,
+                    missed * 100.0,
+                    extra * 100.0,
                     p90 * 100.0
                 );
             }
@@ -513,6 +534,17 @@ fn write_json(path: &Path, doc: &serde_json::Value) -> Result<()> {
 }
 
 /// Prints the figures; returns them as JSON.
+/// A tool's worst setting of a sweep (by mean error) and its figures there.
+#[derive(Debug, Clone, Copy)]
+struct Worst {
+    setting: usize,
+    mean: f64,
+    p90: f64,
+    /// The mean error's two sides: visible truth left out, surface selected outside.
+    missed: f64,
+    extra: f64,
+}
+
 fn report(
     setting: &Setting,
     seed: u64,
@@ -560,13 +592,21 @@ fn report(
          latency = POST /selections wall time"
     );
     println!(
-        "  {:<18} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8} {:>12} {:>12}",
+        "  missed / extra = the mean error's two sides: visible truth left out, and surface \
+         selected outside the region (both per |visible truth|); flooded = regions with more \
+         extra surface than the region itself"
+    );
+    println!(
+        "  {:<18} {:>7} {:>9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>12} {:>12}",
         "tool",
         "regions",
         "mean err",
         "p50 err",
         "p90 err",
         "strict",
+        "missed",
+        "extra",
+        "flooded",
         "refused",
         "latency p50",
         "latency p95"
@@ -589,14 +629,27 @@ fn report(
             percentile(&errors, 0.9),
         );
         let (l50, l95) = (percentile(&latency, 0.5), percentile(&latency, 0.95));
+        // The error split into its two sides, per region's visible truth (as `error`).
+        let share = |count: fn(&eval::ToolResult) -> u64| -> Vec<f64> {
+            results
+                .iter()
+                .map(|r| count(&r.tools[k]) as f64 / r.visible_truth.max(1) as f64)
+                .collect()
+        };
+        let (missed, extra) = (share(|t| t.false_negatives), share(|t| t.false_positives));
+        let flooded = extra.iter().filter(|&&e| e > 1.0).count();
         println!(
-            "  {:<18} {:>7} {:>8.2}% {:>8.2}% {:>8.2}% {:>8.2}% {:>8} {:>9.0} ms {:>9.0} ms",
+            "  {:<18} {:>7} {:>8.2}% {:>8.2}% {:>8.2}% {:>8.2}% {:>7.2}% {:>7.2}% {:>8} {:>8} \
+             {:>9.0} ms {:>9.0} ms",
             label,
             errors.len(),
             m * 100.0,
             p50 * 100.0,
             p90 * 100.0,
             mean(&strict) * 100.0,
+            mean(&missed) * 100.0,
+            mean(&extra) * 100.0,
+            flooded,
             refused,
             l50,
             l95
@@ -604,7 +657,8 @@ fn report(
         summary.insert(
             name.to_string(),
             json!({"regions": errors.len(), "mean_error": m, "p50_error": p50, "p90_error": p90,
-                   "mean_strict_error": mean(&strict), "refused": refused,
+                   "mean_strict_error": mean(&strict), "mean_missed": mean(&missed),
+                   "mean_extra": mean(&extra), "flooded": flooded, "refused": refused,
                    "latency_p50_ms": l50, "latency_p95_ms": l95}),
         );
     }
