@@ -1354,10 +1354,7 @@ fn measure_atlas(
         {
             if c {
                 bytes.ssim_sum += f64::from(s);
-                for k in 0..3 {
-                    let d = f64::from(a[k]) - f64::from(b[k]);
-                    bytes.squared_error += d * d;
-                }
+                bytes.squared_error += fragment_quality::rgb_squared_error(*a, *b);
                 bytes.samples += 3;
             }
         }

@@ -315,6 +315,18 @@ fn luminance(texels: &[[u8; 4]]) -> Vec<f32> {
         .collect()
 }
 
+/// A texel's squared error over its colour channels (alpha left out): what the build's atlas
+/// measure and the WebP match ([`super::webp_match`]) sum over the covered texels.
+#[inline]
+pub fn rgb_squared_error(a: [u8; 4], b: [u8; 4]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let d = f64::from(a[k]) - f64::from(b[k]);
+            d * d
+        })
+        .sum()
+}
+
 /// Structural similarity (Wang et al. 2004: Gaussian window of σ 1.5, `K1 = 0.01`,
 /// `K2 = 0.03`) of two images' luminance, per texel: how the build measures what a JPEG
 /// quality costs a fragment beside its PSNR. `None` when the sizes differ.

@@ -22,6 +22,7 @@
 use rayon::prelude::*;
 
 use super::atlas::{encode_jpeg, encode_webp};
+use super::fragment_quality::rgb_squared_error;
 use super::jpegtables;
 use crate::mesh::Texture;
 
@@ -175,14 +176,7 @@ fn squared_error(sample: &Sample, encoded: &[u8]) -> f64 {
         .zip(back.texels())
         .zip(sample.covered)
         .filter(|(_, c)| **c)
-        .map(|((a, b), _)| {
-            (0..3)
-                .map(|k| {
-                    let d = f64::from(a[k]) - f64::from(b[k]);
-                    d * d
-                })
-                .sum::<f64>()
-        })
+        .map(|((a, b), _)| rgb_squared_error(*a, *b))
         .sum()
 }
 
