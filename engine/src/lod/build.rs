@@ -26,7 +26,7 @@ use super::format::{
 use super::fragment_quality::{self, Features};
 use super::grouping::{PatchOutline, group_patches};
 use super::ingest::{Ingest, Ingested};
-use super::patch::{BuildPatch, ScratchFile, edge_ends};
+use super::patch::{BuildPatch, ScratchFile, edge_ends, edge_runs};
 use super::planar_chart;
 use super::segsimplify::Simplifier;
 use super::simplify::{merge, simplify_group, split_tracked};
@@ -650,7 +650,6 @@ impl<'a> Builder<'a> {
         let (blob, encoded_vertices) = codec::encode_counted(&patch_ref, self.options.zstd_level);
         let encoded_vertices = encoded_vertices as u32;
         let blob_offset = self.blobs.append(&blob)?;
-        let border = patch.border_edges();
         Ok(Stored {
             raw_offset,
             raw_len: raw.len() as u32,
@@ -661,7 +660,7 @@ impl<'a> Builder<'a> {
             vertices: patch.ids.len() as u32,
             bounds: sphere_of_points(patch.positions.iter()),
             cone: normal_cone(&patch.positions, &patch.indices),
-            outline: outline(patch, &border),
+            outline: outline(patch),
             tex_offset,
             tex_len,
             encoded_vertices,
@@ -1616,30 +1615,24 @@ fn place(from: &Path, to: &Path) -> io::Result<()> {
 }
 
 /// Border vertices (or a few samples when there is no border) for grouping.
-fn outline(patch: &BuildPatch, border: &[u64]) -> PatchOutline {
-    let mut ids: Vec<u32> = border
+fn outline(patch: &BuildPatch) -> PatchOutline {
+    // The border on local indices ([`edge_runs`]): a build's patches have one vertex per
+    // original id, so these are the ids' border vertices ([`BuildPatch::border_edges`]).
+    let mut on_border = vec![false; patch.ids.len()];
+    for (key, uses) in edge_runs(&patch.indices, patch.ids.len(), false) {
+        if uses == 1 {
+            let (a, b) = edge_ends(key);
+            on_border[a as usize] = true;
+            on_border[b as usize] = true;
+        }
+    }
+    let mut points: Vec<(u32, [f32; 3])> = on_border
         .iter()
-        .flat_map(|&e| {
-            let (a, b) = edge_ends(e);
-            [a, b]
-        })
+        .enumerate()
+        .filter(|&(_, &b)| b)
+        .map(|(v, _)| (patch.ids[v], patch.positions[v]))
         .collect();
-    ids.sort_unstable();
-    ids.dedup();
-    let lookup: HashMap<u32, usize> = if ids.is_empty() {
-        HashMap::default()
-    } else {
-        patch
-            .ids
-            .iter()
-            .enumerate()
-            .map(|(i, &id)| (id, i))
-            .collect()
-    };
-    let mut points: Vec<(u32, [f32; 3])> = ids
-        .iter()
-        .filter_map(|id| lookup.get(id).map(|&i| (*id, patch.positions[i])))
-        .collect();
+    points.sort_unstable_by_key(|&(id, _)| id);
     if points.is_empty() {
         let step = (patch.ids.len() / 8).max(1);
         points = (0..patch.ids.len())

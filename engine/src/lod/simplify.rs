@@ -91,8 +91,8 @@ pub fn simplify_group(
         return None;
     }
     let (positions, coincident) = distinct_positions(&mesh.positions);
-    let border = local_border(mesh, &mesh.indices);
-    let mut locks = border_locks(mesh, &border);
+    let input = Census::of(mesh, &mesh.indices);
+    let mut locks = border_locks(mesh, &input.border);
     for (v, lock) in locks.iter_mut().enumerate() {
         // Coincident twins (scanner "zipper" seams) are locked too: collapsing one onto the
         // other would glue two boundary sheets together and change the scan's boundary.
@@ -166,7 +166,7 @@ pub fn simplify_group(
     // group. Where the strip is too much of a (small, coarse) group for it to halve, again
     // without the ring, every new edge between shared vertices then counting as a defect.
     let simplified = [true, false].into_iter().find_map(|ring| {
-        sound_simplification(mesh, locks.clone(), ring, &border, shared_outside, &run)
+        sound_simplification(mesh, locks.clone(), ring, &input, shared_outside, &run)
             .filter(|s| reduced(s))
     })?;
     let mut kept = vec![false; mesh.ids.len()];
@@ -184,14 +184,14 @@ pub fn simplify_group(
 }
 
 /// Simplifies `mesh` under `locks` (plus the one-ring of shared vertices with `ring`), keeping
-/// `border`, until the result has no defect [`new_defects`] finds: a fold of two faces onto
+/// the border of the input (whose census is `input`), until the result has no defect [`new_defects`] finds: a fold of two faces onto
 /// each other is dropped, anything else gets the input one-ring of its vertices locked and
 /// another run. `None` when the border changes or defects remain after a few rounds.
 fn sound_simplification(
     mesh: &BuildPatch,
     mut locks: Vec<SimplifyVertex>,
     ring: bool,
-    border: &[u64],
+    input: &Census,
     shared_outside: &dyn Fn(u32) -> bool,
     run: &dyn Fn(&[SimplifyVertex]) -> Vec<u32>,
 ) -> Option<Vec<u32>> {
@@ -199,48 +199,52 @@ fn sound_simplification(
         lock_shared_ring(mesh, shared_outside, &mut locks);
     }
     let mut simplified = run(&locks);
-    let (mut b, mut overused) = border_and_overuse(mesh, &simplified);
-    if b != border {
+    let mut census = Census::of(mesh, &simplified);
+    if census.border != input.border {
         // The simplifier changed the border through some non-manifold configuration: lock the
         // one-ring of every locked vertex as well and try again.
         lock_one_ring(mesh, &mut locks);
         simplified = run(&locks);
-        (b, overused) = border_and_overuse(mesh, &simplified);
-        if b != border {
+        census = Census::of(mesh, &simplified);
+        if census.border != input.border {
             return None;
         }
     }
     // The input's topology is only needed when the output may have a defect: with the ring
-    // locked only an edge used more than twice or a repeated triangle can be one (rare).
-    let mut input: Option<Topology> = None;
+    // locked only an edge used more than twice or a repeated triangle can be one. (On the 5M
+    // relief three groups in four have one: a collapse that folds two faces onto each other.)
+    let mut before: Option<Topology> = None;
     for _ in 0..=MAX_REPAIR_ROUNDS {
-        if ring && !overused && !repeats_a_triangle(mesh, &simplified) {
+        let overused = census.overused;
+        let now = Topology::of(mesh, &simplified, census.edges);
+        if ring && !overused && !now.repeats() {
             return Some(simplified);
         }
-        let input = input.get_or_insert_with(|| Topology::of(mesh, &mesh.indices));
-        let now = Topology::of(mesh, &simplified);
-        let mut bad = new_defects(mesh, input, &now, shared_outside);
+        let before =
+            before.get_or_insert_with(|| Topology::of(mesh, &mesh.indices, input.edges.clone()));
+        let mut bad = new_defects(mesh, before, &now, shared_outside);
         if bad.is_empty() {
             return Some(simplified);
         }
         // The usual defect is a collapse that folds two faces onto each other (the same three
         // vertices twice): both copies cover no surface, so dropping them repairs it, as long as
         // the border stays and nothing else is wrong.
-        if let Some(repaired) = drop_repeated(input, &now, &simplified)
-            && local_border(mesh, &repaired) == border
-        {
-            bad = new_defects(mesh, input, &Topology::of(mesh, &repaired), shared_outside);
-            if bad.is_empty() {
-                return Some(repaired);
+        if let Some(repaired) = drop_repeated(before, &now, &simplified) {
+            let counted = Census::of(mesh, &repaired);
+            if counted.border == input.border {
+                let after = Topology::of(mesh, &repaired, counted.edges);
+                bad = new_defects(mesh, before, &after, shared_outside);
+                if bad.is_empty() {
+                    return Some(repaired);
+                }
             }
         }
         lock_around(mesh, &bad, &mut locks);
         simplified = run(&locks);
-        let (b, over) = border_and_overuse(mesh, &simplified);
-        if b != border {
+        census = Census::of(mesh, &simplified);
+        if census.border != input.border {
             return None;
         }
-        overused = over;
     }
     None
 }
@@ -270,33 +274,35 @@ fn distinct_positions(positions: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<bool>) {
     (out, coincident)
 }
 
-/// Border edges (used by exactly one triangle) of `indices` over `mesh`'s vertices, as
-/// sorted keys of local indices ([`edge_runs`]). A merged group has one vertex per original
-/// id, so its local topology is the ids' topology.
-fn local_border(mesh: &BuildPatch, indices: &[u32]) -> Vec<u64> {
-    border_and_overuse(mesh, indices).0
+/// The edge uses of a triangle set over `mesh`'s vertices ([`edge_runs`], every triangle
+/// counted), with its border (edges used by exactly one triangle, as sorted keys of local
+/// indices) and whether some edge is used by more than two. A merged group has one vertex per
+/// original id, so its local topology is the ids' topology. Counted once per triangle set:
+/// [`Topology::of`] reuses the uses.
+struct Census {
+    edges: Vec<(u64, u32)>,
+    border: Vec<u64>,
+    overused: bool,
 }
 
-/// [`local_border`], and whether some edge is used by more than two triangles (one pass for
-/// both).
-fn border_and_overuse(mesh: &BuildPatch, indices: &[u32]) -> (Vec<u64>, bool) {
-    let mut border = Vec::new();
-    let mut overused = false;
-    for (key, uses) in edge_runs(indices, mesh.ids.len(), false) {
-        match uses {
-            1 => border.push(key),
-            2 => {}
-            _ => overused = true,
+impl Census {
+    fn of(mesh: &BuildPatch, indices: &[u32]) -> Census {
+        let edges = edge_runs(indices, mesh.ids.len(), false);
+        let mut border = Vec::new();
+        let mut overused = false;
+        for &(key, uses) in &edges {
+            match uses {
+                1 => border.push(key),
+                2 => {}
+                _ => overused = true,
+            }
+        }
+        Census {
+            edges,
+            border,
+            overused,
         }
     }
-    (border, overused)
-}
-
-/// Whether two triangles of `indices` have the same three vertices (either orientation).
-fn repeats_a_triangle(mesh: &BuildPatch, indices: &[u32]) -> bool {
-    triangle_runs(indices, mesh.ids.len(), false)
-        .iter()
-        .any(|&(_, c)| c > 1)
 }
 
 /// Simplification rounds with more locks before a group with defects is left unsimplified.
@@ -354,14 +360,23 @@ fn triangle_runs(indices: &[u32], n: usize, skip_degenerate: bool) -> Vec<([u32;
 }
 
 impl Topology {
-    fn of(mesh: &BuildPatch, indices: &[u32]) -> Topology {
+    /// The topology of `indices`, whose [`Census`] counted the edge uses `counted` (these are
+    /// the topology's when no triangle is degenerate, as a simplifier's output never is).
+    fn of(mesh: &BuildPatch, indices: &[u32], counted: Vec<(u64, u32)>) -> Topology {
         let n = mesh.ids.len();
         let mut repeated = triangle_runs(indices, n, true);
         repeated.retain(|&(_, c)| c > 1);
-        Topology {
-            edges: edge_runs(indices, n, true),
-            repeated,
-        }
+        let edges = if indices.chunks_exact(3).any(degenerate) {
+            edge_runs(indices, n, true)
+        } else {
+            counted
+        };
+        Topology { edges, repeated }
+    }
+
+    /// Whether a triangle occurs more than once.
+    fn repeats(&self) -> bool {
+        !self.repeated.is_empty()
     }
 
     fn edge_count(&self, e: u64) -> u32 {
@@ -481,7 +496,7 @@ fn lock_one_ring(mesh: &BuildPatch, locks: &mut [SimplifyVertex]) {
     }
 }
 
-/// Lock flags: the vertices of the group's border edges (local keys from [`local_border`]).
+/// Lock flags: the vertices of the group's border edges (local keys, [`Census::border`]).
 fn border_locks(mesh: &BuildPatch, border: &[u64]) -> Vec<SimplifyVertex> {
     let mut locks = vec![SimplifyVertex::None; mesh.ids.len()];
     for &e in border {
