@@ -529,30 +529,42 @@ pub fn split_tracked(
         },
         max_triangles,
     );
-    let mut products: Vec<BuildPatch> = (0..count).map(|_| BuildPatch::default()).collect();
+    // Each part's triangles in order; its vertices numbered in order of first use, through
+    // one slot per group vertex stamped with the part that numbered it last.
     let mut sources: Vec<Vec<u32>> = vec![Vec::new(); count];
-    let mut local: Vec<HashMap<u32, u32>> = vec![HashMap::default(); count];
-    for (t, tri) in indices.chunks_exact(3).enumerate() {
-        let p = parts[t] as usize;
-        sources[p].push(t as u32);
-        let (patch, map) = (&mut products[p], &mut local[p]);
-        for &v in tri {
-            let li = *map.entry(v).or_insert_with(|| {
-                let v = v as usize;
-                patch.ids.push(mesh.ids[v]);
-                patch.positions.push(mesh.positions[v]);
-                if !mesh.colors.is_empty() {
-                    patch.colors.push(mesh.colors[v]);
-                }
-                if !mesh.normals.is_empty() {
-                    patch.normals.push(mesh.normals[v]);
-                }
-                (patch.ids.len() - 1) as u32
-            });
-            patch.indices.push(li);
-        }
+    for (t, &p) in parts.iter().enumerate() {
+        sources[p as usize].push(t as u32);
     }
-    products.into_iter().zip(sources).collect()
+    let n = mesh.ids.len();
+    let mut stamp = vec![u32::MAX; n];
+    let mut slot = vec![0u32; n];
+    let products = sources.iter().enumerate().map(|(p, tris)| {
+        let mut patch = BuildPatch::default();
+        for &t in tris {
+            for &v in &indices[t as usize * 3..t as usize * 3 + 3] {
+                let v = v as usize;
+                if stamp[v] != p as u32 {
+                    stamp[v] = p as u32;
+                    slot[v] = patch.ids.len() as u32;
+                    patch.ids.push(mesh.ids[v]);
+                    patch.positions.push(mesh.positions[v]);
+                    if !mesh.colors.is_empty() {
+                        patch.colors.push(mesh.colors[v]);
+                    }
+                    if !mesh.normals.is_empty() {
+                        patch.normals.push(mesh.normals[v]);
+                    }
+                }
+                patch.indices.push(slot[v]);
+            }
+        }
+        patch
+    });
+    products
+        .collect::<Vec<_>>()
+        .into_iter()
+        .zip(sources)
+        .collect()
 }
 
 #[cfg(test)]
