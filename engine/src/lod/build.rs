@@ -36,7 +36,6 @@ use crate::mesh::{self, ImportError, ImportStats, Mesh, MeshSink, SourceTexture,
 use crate::progress::Progress;
 use crate::segment::{self, Collector};
 use rayon::prelude::*;
-use rustc_hash::FxHashMap as HashMap;
 use std::io;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -902,16 +901,13 @@ impl<'a> Builder<'a> {
                     let merged = merge(&refs);
                     // A vertex used by more pool patches than group members holding it is
                     // shared with a patch outside the group.
-                    let mut inside: HashMap<u32, u8> = HashMap::with_capacity_and_hasher(
-                        merged.patch.ids.len(),
-                        Default::default(),
-                    );
-                    for p in &patches {
-                        for &id in &p.ids {
-                            let c = inside.entry(id).or_insert(0);
-                            *c = c.saturating_add(1);
-                        }
-                    }
+                    let shared_outside: Vec<bool> = merged
+                        .patch
+                        .ids
+                        .iter()
+                        .zip(&merged.holders)
+                        .map(|(&id, &holders)| uses[id as usize] > holders)
+                        .collect();
                     let maps = Maps {
                         color: this.textured,
                         normals: this.options.normal_maps,
@@ -924,8 +920,6 @@ impl<'a> Builder<'a> {
                     } else {
                         members.iter().map(|_| None).collect()
                     };
-                    let shared_outside =
-                        |id: u32| inside.get(&id).is_some_and(|&c| uses[id as usize] > c);
                     let outcome = match simplify_group(
                         &merged,
                         &shared_outside,

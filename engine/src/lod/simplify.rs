@@ -40,6 +40,8 @@ pub struct GroupStep {
 /// The members merged into one indexed mesh (vertices deduplicated by original ID).
 pub struct Merged {
     pub patch: BuildPatch,
+    /// Per vertex of `patch`, how many members hold it (saturating).
+    pub holders: Vec<u8>,
 }
 
 /// Concatenates member patches, welding shared vertices by original ID.
@@ -50,13 +52,15 @@ pub fn merge(members: &[&BuildPatch]) -> Merged {
     let has_colors = members.iter().all(|m| !m.colors.is_empty());
     let has_normals = members.iter().all(|m| !m.normals.is_empty());
     let mut out = BuildPatch::default();
+    let mut holders: Vec<u8> = Vec::with_capacity(vertex_hint);
     for m in members {
         let remap: Vec<u32> = m
             .ids
             .iter()
             .enumerate()
             .map(|(i, &id)| {
-                *local.entry(id).or_insert_with(|| {
+                let v = *local.entry(id).or_insert_with(|| {
+                    holders.push(0);
                     out.ids.push(id);
                     out.positions.push(m.positions[i]);
                     if has_colors {
@@ -66,22 +70,27 @@ pub fn merge(members: &[&BuildPatch]) -> Merged {
                         out.normals.push(m.normals[i]);
                     }
                     (out.ids.len() - 1) as u32
-                })
+                });
+                holders[v as usize] = holders[v as usize].saturating_add(1);
+                v
             })
             .collect();
         out.indices
             .extend(m.indices.iter().map(|&i| remap[i as usize]));
     }
-    Merged { patch: out }
+    Merged {
+        patch: out,
+        holders,
+    }
 }
 
 /// Simplifies merged group geometry to about half its triangles and splits the result into
-/// patches of at most `max_triangles`. `shared_outside(id)` tells whether the vertex with that
-/// original ID also belongs to a patch outside the group. `None` when the group cannot be
+/// patches of at most `max_triangles`. `shared_outside[v]` tells whether vertex `v` of the
+/// merged patch also belongs to a patch outside the group. `None` when the group cannot be
 /// reduced enough (its members then move on to the next level unchanged).
 pub fn simplify_group(
     merged: &Merged,
-    shared_outside: &dyn Fn(u32) -> bool,
+    shared_outside: &[bool],
     max_triangles: usize,
     simplifier: Simplifier,
 ) -> Option<GroupStep> {
@@ -96,7 +105,7 @@ pub fn simplify_group(
     for (v, lock) in locks.iter_mut().enumerate() {
         // Coincident twins (scanner "zipper" seams) are locked too: collapsing one onto the
         // other would glue two boundary sheets together and change the scan's boundary.
-        if coincident[v] || shared_outside(mesh.ids[v]) {
+        if coincident[v] || shared_outside[v] {
             *lock = SimplifyVertex::Lock;
         }
     }
@@ -192,7 +201,7 @@ fn sound_simplification(
     mut locks: Vec<SimplifyVertex>,
     ring: bool,
     input: &Census,
-    shared_outside: &dyn Fn(u32) -> bool,
+    shared_outside: &[bool],
     run: &dyn Fn(&[SimplifyVertex]) -> Vec<u32>,
 ) -> Option<Vec<u32>> {
     if ring {
@@ -222,7 +231,7 @@ fn sound_simplification(
         }
         let before =
             before.get_or_insert_with(|| Topology::of(mesh, &mesh.indices, input.edges.clone()));
-        let mut bad = new_defects(mesh, before, &now, shared_outside);
+        let mut bad = new_defects(before, &now, shared_outside);
         if bad.is_empty() {
             return Some(simplified);
         }
@@ -233,7 +242,7 @@ fn sound_simplification(
             let counted = Census::of(mesh, &repaired);
             if counted.border == input.border {
                 let after = Topology::of(mesh, &repaired, counted.edges);
-                bad = new_defects(mesh, before, &after, shared_outside);
+                bad = new_defects(before, &after, shared_outside);
                 if bad.is_empty() {
                     return Some(repaired);
                 }
@@ -399,18 +408,12 @@ impl Topology {
 ///   simplified in the same round may create the same edge (or the same triangle) on its side,
 ///   which would make the edge non-manifold (or the triangle duplicate) in the cut that holds
 ///   both. (The locked one-ring of shared vertices makes this impossible; checked all the same.)
-fn new_defects(
-    mesh: &BuildPatch,
-    before: &Topology,
-    now: &Topology,
-    shared_outside: &dyn Fn(u32) -> bool,
-) -> Vec<u32> {
+fn new_defects(before: &Topology, now: &Topology, shared_outside: &[bool]) -> Vec<u32> {
     let mut bad = Vec::new();
     for &(e, count) in &now.edges {
         let (a, b) = super::patch::edge_ends(e);
         // Cheap tests first: most edges are used twice and join an interior vertex.
-        let suspicious = count > 2
-            || (shared_outside(mesh.ids[a as usize]) && shared_outside(mesh.ids[b as usize]));
+        let suspicious = count > 2 || (shared_outside[a as usize] && shared_outside[b as usize]);
         if !suspicious {
             continue;
         }
@@ -469,14 +472,9 @@ fn lock_around(mesh: &BuildPatch, vertices: &[u32], locks: &mut [SimplifyVertex]
 }
 
 /// Locks every vertex adjacent to a vertex shared with a patch outside the group.
-fn lock_shared_ring(
-    mesh: &BuildPatch,
-    shared_outside: &dyn Fn(u32) -> bool,
-    locks: &mut [SimplifyVertex],
-) {
-    let shared: Vec<bool> = mesh.ids.iter().map(|&id| shared_outside(id)).collect();
+fn lock_shared_ring(mesh: &BuildPatch, shared_outside: &[bool], locks: &mut [SimplifyVertex]) {
     for t in mesh.indices.chunks_exact(3) {
-        if t.iter().any(|&v| shared[v as usize]) {
+        if t.iter().any(|&v| shared_outside[v as usize]) {
             for &v in t {
                 locks[v as usize] = SimplifyVertex::Lock;
             }
@@ -599,7 +597,8 @@ mod tests {
         let a = sheet(30, 0, 0.0);
         let merged = merge(&[&a]);
         let border: std::collections::HashSet<u64> = a.border_edges().into_iter().collect();
-        let step = simplify_group(&merged, &|_| false, 4096, Simplifier::Quadric).expect("reduces");
+        let alone = vec![false; merged.patch.ids.len()];
+        let step = simplify_group(&merged, &alone, 4096, Simplifier::Quadric).expect("reduces");
         let product_tris: usize = step.products.iter().map(|p| p.triangle_count()).sum();
         assert!(product_tris <= a.triangle_count() * 6 / 10);
         let mut out_border: Vec<u64> = {
