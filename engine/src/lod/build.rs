@@ -26,7 +26,7 @@ use super::format::{
 use super::fragment_quality::{self, Features};
 use super::grouping::{PatchOutline, group_patches};
 use super::ingest::{Ingest, Ingested};
-use super::patch::{BuildPatch, ScratchFile, edge_ends, edge_runs};
+use super::patch::{BuildPatch, ScratchFile};
 use super::planar_chart;
 use super::segsimplify::Simplifier;
 use super::simplify::{merge, simplify_group, split_tracked};
@@ -1610,15 +1610,10 @@ fn place(from: &Path, to: &Path) -> io::Result<()> {
 
 /// Border vertices (or a few samples when there is no border) for grouping.
 fn outline(patch: &BuildPatch) -> PatchOutline {
-    // The border on local indices ([`edge_runs`]): a build's patches have one vertex per
-    // original id, so these are the ids' border vertices ([`BuildPatch::border_edges`]).
     let mut on_border = vec![false; patch.ids.len()];
-    for (key, uses) in edge_runs(&patch.indices, patch.ids.len(), false) {
-        if uses == 1 {
-            let (a, b) = edge_ends(key);
-            on_border[a as usize] = true;
-            on_border[b as usize] = true;
-        }
+    for (a, b) in patch.local_border_edges() {
+        on_border[a as usize] = true;
+        on_border[b as usize] = true;
     }
     let mut points: Vec<(u32, [f32; 3])> = on_border
         .iter()

@@ -870,9 +870,9 @@ fn encode_split(
     // lengths ([`residual_bits`]) come within a tenth of each other; elsewhere that estimate
     // names the shorter one. (The gaps are the shorter on every patch of the 5M relief: 4.8x
     // on the leaves, 1.3-2x above; the scans in `../shared/data` build to the same bytes.)
-    let predicted = |residuals: &[(usize, i64)]| {
+    let predicted = || {
         let mut sink = Sink::new(v3, ID_CHANNELS);
-        for &(channel, r) in residuals {
+        for &(channel, r) in &id_residuals {
             sink.put(channel, r);
         }
         sink.finish()
@@ -904,9 +904,9 @@ fn encode_split(
         if as_gaps * 10 < as_predicted * 9 {
             (gapped(), true)
         } else if as_predicted * 10 < as_gaps * 9 {
-            (predicted(&id_residuals), false)
+            (predicted(), false)
         } else {
-            let (a, b) = (predicted(&id_residuals), gapped());
+            let (a, b) = (predicted(), gapped());
             if b.len() < a.len() {
                 (b, true)
             } else {
@@ -914,7 +914,7 @@ fn encode_split(
             }
         }
     } else {
-        (predicted(&id_residuals), false)
+        (predicted(), false)
     };
 
     let color_stream = colors
@@ -1646,13 +1646,7 @@ mod tests {
     /// repeated points (ties by index) and points one step apart across a power of two.
     #[test]
     fn morton_sequence_orders_as_the_comparison() {
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = crate::testing::xorshift(0x2545_f491);
         let by_comparison = |points: &[[u32; 3]]| {
             let mut s: Vec<u32> = (0..points.len() as u32).collect();
             s.sort_by(|&a, &b| {
@@ -1671,7 +1665,7 @@ mod tests {
             (0, 1 << 24),
         ] {
             let mut points: Vec<[u32; 3]> = (0..3000)
-                .map(|_| std::array::from_fn(|_| base + (next() % spread as u64) as u32))
+                .map(|_| std::array::from_fn(|_| base + next() % spread))
                 .collect();
             points.extend_from_within(..200);
             assert_eq!(

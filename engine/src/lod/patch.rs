@@ -181,16 +181,21 @@ impl BuildPatch {
             },
             "a patch with two vertices of one original ID"
         );
-        let mut border: Vec<u64> = edge_runs(&self.indices, self.ids.len(), false)
-            .into_iter()
-            .filter(|&(_, uses)| uses == 1)
-            .map(|(key, _)| {
-                let (a, b) = edge_ends(key);
-                edge_key(self.ids[a as usize], self.ids[b as usize])
-            })
+        let mut border: Vec<u64> = self
+            .local_border_edges()
+            .map(|(a, b)| edge_key(self.ids[a as usize], self.ids[b as usize]))
             .collect();
         border.sort_unstable();
         border
+    }
+
+    /// The border edges ([`Self::border_edges`]) as pairs of local vertex indices, in the
+    /// order of their local keys.
+    pub fn local_border_edges(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+        edge_runs(&self.indices, self.ids.len(), false)
+            .into_iter()
+            .filter(|&(_, uses)| uses == 1)
+            .map(|(key, _)| edge_ends(key))
     }
 
     /// Byte offset of the original IDs in the scratch record.

@@ -193,9 +193,9 @@ pub fn simplify_group(
 }
 
 /// Simplifies `mesh` under `locks` (plus the one-ring of shared vertices with `ring`), keeping
-/// the border of the input (whose census is `input`), until the result has no defect [`new_defects`] finds: a fold of two faces onto
-/// each other is dropped, anything else gets the input one-ring of its vertices locked and
-/// another run. `None` when the border changes or defects remain after a few rounds.
+/// the border of the input (whose census is `input`), until the result has no defect
+/// [`new_defects`] finds: a fold of two faces onto each other is dropped, anything else gets
+/// the input one-ring of its vertices locked and another run. `None` when the border changes or defects remain after a few rounds.
 fn sound_simplification(
     mesh: &BuildPatch,
     mut locks: Vec<SimplifyVertex>,
@@ -536,32 +536,31 @@ pub fn split_tracked(
     let n = mesh.ids.len();
     let mut stamp = vec![u32::MAX; n];
     let mut slot = vec![0u32; n];
-    let products = sources.iter().enumerate().map(|(p, tris)| {
-        let mut patch = BuildPatch::default();
-        for &t in tris {
-            for &v in &indices[t as usize * 3..t as usize * 3 + 3] {
-                let v = v as usize;
-                if stamp[v] != p as u32 {
-                    stamp[v] = p as u32;
-                    slot[v] = patch.ids.len() as u32;
-                    patch.ids.push(mesh.ids[v]);
-                    patch.positions.push(mesh.positions[v]);
-                    if !mesh.colors.is_empty() {
-                        patch.colors.push(mesh.colors[v]);
-                    }
-                    if !mesh.normals.is_empty() {
-                        patch.normals.push(mesh.normals[v]);
-                    }
-                }
-                patch.indices.push(slot[v]);
-            }
-        }
-        patch
-    });
-    products
-        .collect::<Vec<_>>()
+    sources
         .into_iter()
-        .zip(sources)
+        .enumerate()
+        .map(|(p, tris)| {
+            let mut patch = BuildPatch::default();
+            for &t in &tris {
+                for &v in &indices[t as usize * 3..t as usize * 3 + 3] {
+                    let v = v as usize;
+                    if stamp[v] != p as u32 {
+                        stamp[v] = p as u32;
+                        slot[v] = patch.ids.len() as u32;
+                        patch.ids.push(mesh.ids[v]);
+                        patch.positions.push(mesh.positions[v]);
+                        if !mesh.colors.is_empty() {
+                            patch.colors.push(mesh.colors[v]);
+                        }
+                        if !mesh.normals.is_empty() {
+                            patch.normals.push(mesh.normals[v]);
+                        }
+                    }
+                    patch.indices.push(slot[v]);
+                }
+            }
+            (patch, tris)
+        })
         .collect()
 }
 
