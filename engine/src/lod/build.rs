@@ -335,12 +335,14 @@ pub fn build_from(
     // bounds and mean edge it is chosen from as they are).
     let grid = choose_grid(&ingested);
     if options.vertex_order == VertexOrder::Morton {
-        vertex_order::renumber(
-            &mut ingested,
-            &grid,
-            &scratch.path,
-            options.memory_budget / 5,
-        )?;
+        pool.install(|| {
+            vertex_order::renumber(
+                &mut ingested,
+                &grid,
+                &scratch.path,
+                options.memory_budget / 5,
+            )
+        })?;
     }
     pool.install(|| {
         Builder::run(

@@ -89,7 +89,7 @@ fn triangle_adjacency(indices: &[u32]) -> Adjacency {
     let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(tri_count * 3 / 2);
     for lo in 0..n {
         let around = &mut half[start[lo] as usize..start[lo + 1] as usize];
-        around.sort_unstable();
+        super::patch::sort_small(around);
         for users in around.chunk_by(|x, y| x.0 == y.0) {
             for w in users.windows(2) {
                 if w[0].1 != w[1].1 {
@@ -250,53 +250,57 @@ fn segment_graph(
         .map(|(c, &w)| *c / (w.max(1) as f32))
         .collect();
 
-    // Shared-edge counts between segments.
-    let mut links: Vec<(u32, u32)> = Vec::new();
+    // Shared-edge counts between segments: each segment's neighbours across its triangles'
+    // edges, grouped by a counting sort on the segment and a small sort of each one's list
+    // (the same runs, in the same order, as sorting every (segment, neighbour) pair).
+    let mut start = vec![0u32; count + 1];
+    for t in 0..segment_of.len() {
+        let s = segment_of[t];
+        for &nb in adjacency.of(t) {
+            if segment_of[nb as usize] != s {
+                start[s as usize + 1] += 1;
+            }
+        }
+    }
+    for s in 0..count {
+        start[s + 1] += start[s];
+    }
+    let mut fill = start.clone();
+    let mut across = vec![0u32; start[count] as usize];
     for t in 0..segment_of.len() {
         let s = segment_of[t];
         for &nb in adjacency.of(t) {
             let o = segment_of[nb as usize];
             if o != s {
-                links.push((s, o));
+                across[fill[s as usize] as usize] = o;
+                fill[s as usize] += 1;
             }
         }
     }
-    links.sort_unstable();
     let mut xadj = vec![0 as Idx; count + 1];
     let mut adjncy = Vec::new();
     let mut adjwgt = Vec::new();
-    let mut i = 0;
-    let mut current = 0usize;
-    while i < links.len() {
-        let (s, o) = links[i];
-        let mut j = i;
-        while j < links.len() && links[j] == (s, o) {
-            j += 1;
+    for s in 0..count {
+        let neighbours = &mut across[start[s] as usize..start[s + 1] as usize];
+        super::patch::sort_small(neighbours);
+        for run in neighbours.chunk_by(|x, y| x == y) {
+            let o = run[0] as usize;
+            let shared = run.len() as f32;
+            // System paper §3.1.1: W_E = n_i · n_j, mapped to positive integers and sharpened
+            // so METIS prefers cutting across creases; colour edges are cut preferentially too.
+            let similarity = ((1.0 + mean_normal[s].dot(mean_normal[o])) * 0.5).powi(4);
+            let color_similarity = if has_colors {
+                (-(mean_color[s] - mean_color[o]).length() * 4.0).exp()
+            } else {
+                1.0
+            };
+            let w = (shared * (1.0 + 31.0 * similarity * color_similarity))
+                .round()
+                .max(1.0);
+            adjncy.push(o as Idx);
+            adjwgt.push(w as Idx);
         }
-        while current < s as usize {
-            current += 1;
-            xadj[current] = adjncy.len() as Idx;
-        }
-        let shared = (j - i) as f32;
-        // System paper §3.1.1: W_E = n_i · n_j, mapped to positive integers and sharpened so
-        // METIS prefers cutting across creases; colour edges are cut preferentially too.
-        let similarity =
-            ((1.0 + mean_normal[s as usize].dot(mean_normal[o as usize])) * 0.5).powi(4);
-        let color_similarity = if has_colors {
-            (-(mean_color[s as usize] - mean_color[o as usize]).length() * 4.0).exp()
-        } else {
-            1.0
-        };
-        let w = (shared * (1.0 + 31.0 * similarity * color_similarity))
-            .round()
-            .max(1.0);
-        adjncy.push(o as Idx);
-        adjwgt.push(w as Idx);
-        i = j;
-    }
-    while current < count {
-        current += 1;
-        xadj[current] = adjncy.len() as Idx;
+        xadj[s + 1] = adjncy.len() as Idx;
     }
     Graph {
         xadj,

@@ -198,9 +198,13 @@ fn spilled_order(
 }
 
 /// Writes the Morton order of `positions` on `grid` into `slots` (as long as `positions`): a
-/// counting pass, a stable scatter of the indices into their bins, then each bin sorted alone,
-/// ties in source order.
+/// counting pass, a scatter of the indices into their bins, then each bin sorted alone (on
+/// both cores), ties by index. The points of a bin share the bits of their coordinates above
+/// the bin's: where the bits below fit [`super::build::MORTON_BITS`] an axis (grids up to 2²⁶
+/// a side), those alone are interleaved into a 64-bit code, which orders them as the
+/// comparison does, and the codes are sorted instead of comparing coordinates.
 fn sort_into(positions: &[[f32; 3]], grid: &Grid, slots: &mut [u32]) {
+    use rayon::prelude::*;
     let binning = Binning::new(positions, grid);
     let mut starts = vec![0usize; (1 << BIN_BITS) + 1];
     for v in 0..positions.len() {
@@ -215,18 +219,39 @@ fn sort_into(positions: &[[f32; 3]], grid: &Grid, slots: &mut [u32]) {
         slots[next[b]] = v as u32;
         next[b] += 1;
     }
-    let mut keyed: Vec<([u32; 3], u32)> = Vec::new();
+    let mut bins: Vec<&mut [u32]> = Vec::with_capacity(1 << BIN_BITS);
+    let mut rest = slots;
     for w in starts.windows(2) {
-        let bin = &mut slots[w[0]..w[1]];
-        if bin.len() < 2 {
-            continue;
+        let (bin, after) = rest.split_at_mut(w[1] - w[0]);
+        if bin.len() > 1 {
+            bins.push(bin);
         }
-        keyed.clear();
-        keyed.extend(bin.iter().map(|&v| (binning.point(v as usize), v)));
-        keyed.sort_unstable_by(|&a, &b| morton_cmp(a, b));
-        for (slot, &(_, v)) in bin.iter_mut().zip(&keyed) {
-            *slot = v;
-        }
+        rest = after;
+    }
+    if binning.shift <= super::build::MORTON_BITS {
+        let mask = (1u32 << binning.shift) - 1;
+        bins.into_par_iter()
+            .for_each_init(Vec::new, |codes: &mut Vec<(u64, u32)>, bin| {
+                codes.clear();
+                codes.extend(
+                    bin.iter()
+                        .map(|&v| (morton3(binning.point(v as usize).map(|c| c & mask)), v)),
+                );
+                codes.sort_unstable();
+                for (slot, &(_, v)) in bin.iter_mut().zip(codes.iter()) {
+                    *slot = v;
+                }
+            });
+    } else {
+        bins.into_par_iter()
+            .for_each_init(Vec::new, |keyed: &mut Vec<([u32; 3], u32)>, bin| {
+                keyed.clear();
+                keyed.extend(bin.iter().map(|&v| (binning.point(v as usize), v)));
+                keyed.sort_unstable_by(|&a, &b| morton_cmp(a, b));
+                for (slot, &(_, v)) in bin.iter_mut().zip(keyed.iter()) {
+                    *slot = v;
+                }
+            });
     }
 }
 
@@ -363,6 +388,50 @@ mod tests {
         );
         assert_eq!(morton_order(&[[2.0; 3]; 3], &unit), vec![0, 1, 2]);
         assert!(morton_order(&[], &unit).is_empty());
+    }
+
+    #[test]
+    fn the_binned_sort_is_the_comparison_sort_of_the_whole_set() {
+        // Points in clusters with repeats, on a grid whose bins leave at most 21 bits an axis
+        // below them (sorted by 64-bit codes) and on one 2²⁸ steps a side (more bits below
+        // the bins than the codes hold: sorted by the comparison).
+        let mut next = crate::testing::xorshift(29);
+        let mut positions: Vec<[f32; 3]> = Vec::new();
+        for _ in 0..40 {
+            let centre = [0, 1, 2].map(|_| (next() % 1000) as f32);
+            for _ in 0..60 {
+                let p = [0, 1, 2].map(|k| centre[k] + (next() % 200) as f32 * 0.01);
+                positions.push(p);
+                if next() % 5 == 0 {
+                    positions.push(p);
+                }
+            }
+        }
+        for step in [1e-3, 4e-6] {
+            let grid = Grid {
+                origin: [0.0; 3],
+                step,
+            };
+            let top = positions
+                .iter()
+                .flat_map(|&p| grid.quantize(p))
+                .max()
+                .unwrap_or(0);
+            let below_bins = (32 - top.leading_zeros()).saturating_sub(BIN_BITS / 3);
+            assert_eq!(
+                below_bins <= crate::lod::build::MORTON_BITS,
+                step > 1e-4,
+                "step {step}: {below_bins} bits below the bins"
+            );
+            let mut whole: Vec<u32> = (0..positions.len() as u32).collect();
+            whole.sort_by(|&a, &b| {
+                morton_cmp(
+                    (grid.quantize(positions[a as usize]), a),
+                    (grid.quantize(positions[b as usize]), b),
+                )
+            });
+            assert_eq!(morton_order(&positions, &grid), whole, "step {step}");
+        }
     }
 
     #[test]
