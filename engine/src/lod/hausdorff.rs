@@ -9,6 +9,8 @@
 
 use glam::Vec3;
 
+use super::patch::ByVertex;
+
 /// Uniform grid over a triangle set for nearest-surface queries.
 pub struct TriangleGrid<'a> {
     positions: &'a [[f32; 3]],
@@ -427,46 +429,6 @@ fn corners_of(indices: &[u32]) -> impl Iterator<Item = (u32, u32)> + Clone + '_ 
         .iter()
         .enumerate()
         .map(|(i, &v)| (v, (i / 3) as u32))
-}
-
-/// Entries keyed by a vertex below `n`, grouped by a counting sort: a membership test reads
-/// only its vertex's few entries (cheaper than hashing every triangle and edge of a group).
-struct ByVertex<T> {
-    start: Vec<u32>,
-    items: Vec<T>,
-}
-
-impl<T: Copy + Default + PartialEq> ByVertex<T> {
-    fn new(n: usize, entries: impl Iterator<Item = (u32, T)> + Clone) -> ByVertex<T> {
-        let mut start = vec![0u32; n + 1];
-        for (v, _) in entries.clone() {
-            start[v as usize + 1] += 1;
-        }
-        for v in 0..n {
-            start[v + 1] += start[v];
-        }
-        let mut fill = start.clone();
-        let mut items = vec![T::default(); start[n] as usize];
-        for (v, item) in entries {
-            let slot = &mut fill[v as usize];
-            items[*slot as usize] = item;
-            *slot += 1;
-        }
-        ByVertex { start, items }
-    }
-
-    fn of(&self, v: u32) -> &[T] {
-        let v = v as usize;
-        if v + 1 < self.start.len() {
-            &self.items[self.start[v] as usize..self.start[v + 1] as usize]
-        } else {
-            &[]
-        }
-    }
-
-    fn contains(&self, v: u32, item: T) -> bool {
-        self.of(v).contains(&item)
-    }
 }
 
 #[cfg(test)]

@@ -14,6 +14,8 @@
 use glam::Vec3;
 use metis::Idx;
 
+use super::patch::{ByVertex, sort_small};
+
 /// Largest segment of step 1, in triangles.
 const SEGMENT_MAX: usize = 192;
 /// Segments below this size grow with twice the angle limit, so noisy scans still coarsen
@@ -89,7 +91,7 @@ fn triangle_adjacency(indices: &[u32]) -> Adjacency {
     let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(tri_count * 3 / 2);
     for lo in 0..n {
         let around = &mut half[start[lo] as usize..start[lo + 1] as usize];
-        super::patch::sort_small(around);
+        sort_small(around);
         for users in around.chunk_by(|x, y| x.0 == y.0) {
             for w in users.windows(2) {
                 if w[0].1 != w[1].1 {
@@ -251,38 +253,22 @@ fn segment_graph(
         .collect();
 
     // Shared-edge counts between segments: each segment's neighbours across its triangles'
-    // edges, grouped by a counting sort on the segment and a small sort of each one's list
-    // (the same runs, in the same order, as sorting every (segment, neighbour) pair).
-    let mut start = vec![0u32; count + 1];
-    for t in 0..segment_of.len() {
+    // edges, grouped by segment and each list sorted alone (the same runs, in the same order,
+    // as sorting every (segment, neighbour) pair).
+    let links = (0..segment_of.len()).flat_map(|t| {
         let s = segment_of[t];
-        for &nb in adjacency.of(t) {
-            if segment_of[nb as usize] != s {
-                start[s as usize + 1] += 1;
-            }
-        }
-    }
-    for s in 0..count {
-        start[s + 1] += start[s];
-    }
-    let mut fill = start.clone();
-    let mut across = vec![0u32; start[count] as usize];
-    for t in 0..segment_of.len() {
-        let s = segment_of[t];
-        for &nb in adjacency.of(t) {
+        adjacency.of(t).iter().filter_map(move |&nb| {
             let o = segment_of[nb as usize];
-            if o != s {
-                across[fill[s as usize] as usize] = o;
-                fill[s as usize] += 1;
-            }
-        }
-    }
+            (o != s).then_some((s, o))
+        })
+    });
+    let mut across = ByVertex::new(count, links);
     let mut xadj = vec![0 as Idx; count + 1];
     let mut adjncy = Vec::new();
     let mut adjwgt = Vec::new();
     for s in 0..count {
-        let neighbours = &mut across[start[s] as usize..start[s + 1] as usize];
-        super::patch::sort_small(neighbours);
+        let neighbours = across.of_mut(s as u32);
+        sort_small(neighbours);
         for run in neighbours.chunk_by(|x, y| x == y) {
             let o = run[0] as usize;
             let shared = run.len() as f32;

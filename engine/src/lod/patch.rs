@@ -147,6 +147,56 @@ pub fn sort_small<T: Ord + Copy>(s: &mut [T]) {
     }
 }
 
+/// Entries keyed by a vertex (or any key) below `n`, grouped by a counting sort: a membership
+/// test reads only its key's few entries (cheaper than hashing every triangle and edge of a
+/// group), and each key's entries can be sorted alone.
+pub(crate) struct ByVertex<T> {
+    start: Vec<u32>,
+    items: Vec<T>,
+}
+
+impl<T: Copy + Default + PartialEq> ByVertex<T> {
+    pub(crate) fn new(n: usize, entries: impl Iterator<Item = (u32, T)> + Clone) -> ByVertex<T> {
+        let mut start = vec![0u32; n + 1];
+        for (v, _) in entries.clone() {
+            start[v as usize + 1] += 1;
+        }
+        for v in 0..n {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut items = vec![T::default(); start[n] as usize];
+        for (v, item) in entries {
+            let slot = &mut fill[v as usize];
+            items[*slot as usize] = item;
+            *slot += 1;
+        }
+        ByVertex { start, items }
+    }
+
+    pub(crate) fn of(&self, v: u32) -> &[T] {
+        let v = v as usize;
+        if v + 1 < self.start.len() {
+            &self.items[self.start[v] as usize..self.start[v + 1] as usize]
+        } else {
+            &[]
+        }
+    }
+
+    pub(crate) fn of_mut(&mut self, v: u32) -> &mut [T] {
+        let v = v as usize;
+        if v + 1 < self.start.len() {
+            &mut self.items[self.start[v] as usize..self.start[v + 1] as usize]
+        } else {
+            &mut []
+        }
+    }
+
+    pub(crate) fn contains(&self, v: u32, item: T) -> bool {
+        self.of(v).contains(&item)
+    }
+}
+
 /// The corner after corner `c` in its triangle (corners `3f`, `3f + 1`, `3f + 2`).
 #[inline]
 pub fn next_corner(c: usize) -> usize {

@@ -195,7 +195,8 @@ pub fn simplify_group(
 /// Simplifies `mesh` under `locks` (plus the one-ring of shared vertices with `ring`), keeping
 /// the border of the input (whose census is `input`), until the result has no defect
 /// [`new_defects`] finds: a fold of two faces onto each other is dropped, anything else gets
-/// the input one-ring of its vertices locked and another run. `None` when the border changes or defects remain after a few rounds.
+/// the input one-ring of its vertices locked and another run. `None` when the border changes
+/// or defects remain after a few rounds.
 fn sound_simplification(
     mesh: &BuildPatch,
     mut locks: Vec<SimplifyVertex>,

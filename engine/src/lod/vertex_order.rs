@@ -204,7 +204,6 @@ fn spilled_order(
 /// a side), those alone are interleaved into a 64-bit code, which orders them as the
 /// comparison does, and the codes are sorted instead of comparing coordinates.
 fn sort_into(positions: &[[f32; 3]], grid: &Grid, slots: &mut [u32]) {
-    use rayon::prelude::*;
     let binning = Binning::new(positions, grid);
     let mut starts = vec![0usize; (1 << BIN_BITS) + 1];
     for v in 0..positions.len() {
@@ -230,29 +229,36 @@ fn sort_into(positions: &[[f32; 3]], grid: &Grid, slots: &mut [u32]) {
     }
     if binning.shift <= super::build::MORTON_BITS {
         let mask = (1u32 << binning.shift) - 1;
-        bins.into_par_iter()
-            .for_each_init(Vec::new, |codes: &mut Vec<(u64, u32)>, bin| {
-                codes.clear();
-                codes.extend(
-                    bin.iter()
-                        .map(|&v| (morton3(binning.point(v as usize).map(|c| c & mask)), v)),
-                );
-                codes.sort_unstable();
-                for (slot, &(_, v)) in bin.iter_mut().zip(codes.iter()) {
-                    *slot = v;
-                }
-            });
+        sort_bins(
+            bins,
+            |v| morton3(binning.point(v as usize).map(|c| c & mask)),
+            |a, b| a.cmp(b),
+        );
     } else {
-        bins.into_par_iter()
-            .for_each_init(Vec::new, |keyed: &mut Vec<([u32; 3], u32)>, bin| {
-                keyed.clear();
-                keyed.extend(bin.iter().map(|&v| (binning.point(v as usize), v)));
-                keyed.sort_unstable_by(|&a, &b| morton_cmp(a, b));
-                for (slot, &(_, v)) in bin.iter_mut().zip(keyed.iter()) {
-                    *slot = v;
-                }
-            });
+        sort_bins(
+            bins,
+            |v| binning.point(v as usize),
+            |&a, &b| morton_cmp(a, b),
+        );
     }
+}
+
+/// Sorts each bin (on the pool's threads) by `order` on the pairs (`key` of an index, index).
+fn sort_bins<K: Copy + Send>(
+    bins: Vec<&mut [u32]>,
+    key: impl Fn(u32) -> K + Sync,
+    order: impl Fn(&(K, u32), &(K, u32)) -> std::cmp::Ordering + Sync,
+) {
+    use rayon::prelude::*;
+    bins.into_par_iter()
+        .for_each_init(Vec::new, |keyed: &mut Vec<(K, u32)>, bin| {
+            keyed.clear();
+            keyed.extend(bin.iter().map(|&v| (key(v), v)));
+            keyed.sort_unstable_by(&order);
+            for (slot, &(_, v)) in bin.iter_mut().zip(keyed.iter()) {
+                *slot = v;
+            }
+        });
 }
 
 /// Renumbers the ingested scan in the Morton order of its points on `grid`: positions,

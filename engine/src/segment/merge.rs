@@ -68,6 +68,23 @@ pub struct Hierarchy {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 struct Candidate(u128);
 
+impl Candidate {
+    fn new(cost: f64, a: u32, b: u32) -> Candidate {
+        // `total_cmp`'s transform, with the sign bit flipped so that unsigned order is its order.
+        let bits = cost.to_bits() as i64;
+        let ordered = ((bits ^ ((((bits >> 63) as u64) >> 1) as i64)) as u64) ^ (1 << 63);
+        Candidate(((ordered as u128) << 64) | ((a as u128) << 32) | b as u128)
+    }
+
+    fn a(self) -> u32 {
+        (self.0 >> 32) as u32
+    }
+
+    fn b(self) -> u32 {
+        self.0 as u32
+    }
+}
+
 /// A min-queue of candidates: a 4-ary heap, half as deep as a binary one, whose four children
 /// of a node sit side by side in memory (64 bytes). The merge's queue holds hundreds of
 /// thousands of candidates, most of them out of date by the time they surface; popping them
@@ -120,23 +137,6 @@ impl Queue {
         }
         self.items[i] = last;
         Some(top)
-    }
-}
-
-impl Candidate {
-    fn new(cost: f64, a: u32, b: u32) -> Candidate {
-        // `total_cmp`'s transform, with the sign bit flipped so that unsigned order is its order.
-        let bits = cost.to_bits() as i64;
-        let ordered = ((bits ^ ((((bits >> 63) as u64) >> 1) as i64)) as u64) ^ (1 << 63);
-        Candidate(((ordered as u128) << 64) | ((a as u128) << 32) | b as u128)
-    }
-
-    fn a(self) -> u32 {
-        (self.0 >> 32) as u32
-    }
-
-    fn b(self) -> u32 {
-        self.0 as u32
     }
 }
 
@@ -471,21 +471,20 @@ mod tests {
             queue.push(Candidate::new(cost, a, b));
             reference.push((cost, a, b));
             if round % 3 == 2 {
-                let c = queue.pop().expect("not empty");
-                popped.push((c.a(), c.b(), c));
+                popped.push(queue.pop().expect("not empty"));
                 reference.sort_by(|x, y| x.0.total_cmp(&y.0).then((x.1, x.2).cmp(&(y.1, y.2))));
                 let (cost, a, b) = reference.remove(0);
-                expected.push((a, b, Candidate::new(cost, a, b)));
+                expected.push(Candidate::new(cost, a, b));
             }
         }
         while let Some(c) = queue.pop() {
-            popped.push((c.a(), c.b(), c));
+            popped.push(c);
         }
         reference.sort_by(|x, y| x.0.total_cmp(&y.0).then((x.1, x.2).cmp(&(y.1, y.2))));
         expected.extend(
             reference
                 .iter()
-                .map(|&(cost, a, b)| (a, b, Candidate::new(cost, a, b))),
+                .map(|&(cost, a, b)| Candidate::new(cost, a, b)),
         );
         assert_eq!(popped, expected);
     }
