@@ -64,25 +64,34 @@ pub struct Encoded {
 
 /// The front: directed edges with the third corner of their triangle, in a doubly linked
 /// list per loop. Encoder and decoder update it identically.
-#[derive(Default)]
 struct Front {
-    a: Vec<u32>,
-    b: Vec<u32>,
-    o: Vec<u32>,
-    prev: Vec<u32>,
-    next: Vec<u32>,
-    active: Vec<bool>,
+    edges: Vec<FrontEdge>,
     /// Edges before this one have been taken.
     head: usize,
     /// Triangles output so far around each vertex.
     degree: Vec<u32>,
 }
 
+/// A front edge `(a, b)` of the triangle `(a, b, o)`, with its loop neighbours (one record
+/// per edge: the traversal reads and writes an edge's fields together).
+#[derive(Clone, Copy)]
+struct FrontEdge {
+    a: u32,
+    b: u32,
+    o: u32,
+    prev: u32,
+    next: u32,
+    active: bool,
+}
+
 impl Front {
     fn new(n: usize) -> Self {
         Front {
+            // About one edge per triangle and one per vertex (two triangles a vertex), up to
+            // what a patch holds: a hostile count reserves no more.
+            edges: Vec::with_capacity((3 * n + 3).min(1 << 16)),
+            head: 0,
             degree: vec![0; n],
-            ..Default::default()
         }
     }
 
@@ -102,25 +111,27 @@ impl Front {
     fn context(&self, e: u32) -> usize {
         let ei = e as usize;
         let d = |v: u32| self.degree[v as usize].min(DEGREE_CAP) as usize;
-        let open = |x: u32| self.active[x as usize] as usize;
-        let ends = d(self.a[ei]) * (DEGREE_CAP as usize + 1) + d(self.b[ei]);
-        (ends << 2) | (open(self.prev[ei]) << 1) | open(self.next[ei])
+        let open = |x: u32| self.edges[x as usize].active as usize;
+        let ends = d(self.edges[ei].a) * (DEGREE_CAP as usize + 1) + d(self.edges[ei].b);
+        (ends << 2) | (open(self.edges[ei].prev) << 1) | open(self.edges[ei].next)
     }
 
     fn push(&mut self, a: u32, b: u32, o: u32) -> u32 {
-        let e = self.a.len() as u32;
-        self.a.push(a);
-        self.b.push(b);
-        self.o.push(o);
-        self.prev.push(e);
-        self.next.push(e);
-        self.active.push(true);
+        let e = self.edges.len() as u32;
+        self.edges.push(FrontEdge {
+            a,
+            b,
+            o,
+            prev: e,
+            next: e,
+            active: true,
+        });
         e
     }
 
     fn link(&mut self, x: u32, y: u32) {
-        self.next[x as usize] = y;
-        self.prev[y as usize] = x;
+        self.edges[x as usize].next = y;
+        self.edges[y as usize].prev = x;
     }
 
     /// A start triangle's three edges as one loop.
@@ -136,10 +147,10 @@ impl Front {
     /// The oldest active edge not taken yet (first in, first out: the front grows in rings,
     /// as Corto's does, which on regular meshes makes long runs of one symbol).
     fn pop(&mut self) -> Option<u32> {
-        while self.head < self.a.len() {
+        while self.head < self.edges.len() {
             let e = self.head as u32;
             self.head += 1;
-            if self.active[e as usize] {
+            if self.edges[e as usize].active {
                 return Some(e);
             }
         }
@@ -148,41 +159,47 @@ impl Front {
 
     /// Whether the previous edge of `e` ends at `e`'s start and begins at `c`.
     fn left_is(&self, e: u32, c: u32) -> bool {
-        let p = self.prev[e as usize] as usize;
-        p != e as usize && self.active[p] && self.b[p] == self.a[e as usize] && self.a[p] == c
+        let p = self.edges[e as usize].prev as usize;
+        p != e as usize
+            && self.edges[p].active
+            && self.edges[p].b == self.edges[e as usize].a
+            && self.edges[p].a == c
     }
 
     fn right_is(&self, e: u32, c: u32) -> bool {
-        let q = self.next[e as usize] as usize;
-        q != e as usize && self.active[q] && self.a[q] == self.b[e as usize] && self.b[q] == c
+        let q = self.edges[e as usize].next as usize;
+        q != e as usize
+            && self.edges[q].active
+            && self.edges[q].a == self.edges[e as usize].b
+            && self.edges[q].b == c
     }
 
     /// Applies the triangle `(b, a, c)` across the active edge `e` with the given symbol
     /// (not `BOUNDARY`); returns the triangle as it is output.
     fn apply(&mut self, e: u32, symbol: u32, c: u32) -> [u32; 3] {
         let ei = e as usize;
-        let (a, b) = (self.a[ei], self.b[ei]);
-        let (p, q) = (self.prev[ei], self.next[ei]);
-        self.active[ei] = false;
+        let (a, b) = (self.edges[ei].a, self.edges[ei].b);
+        let (p, q) = (self.edges[ei].prev, self.edges[ei].next);
+        self.edges[ei].active = false;
         match symbol {
             LEFT => {
-                self.active[p as usize] = false;
-                let pp = self.prev[p as usize];
+                self.edges[p as usize].active = false;
+                let pp = self.edges[p as usize].prev;
                 let n = self.push(c, b, a);
                 self.link(pp, n);
                 self.link(n, q);
             }
             RIGHT => {
-                self.active[q as usize] = false;
-                let qq = self.next[q as usize];
+                self.edges[q as usize].active = false;
+                let qq = self.edges[q as usize].next;
                 let n = self.push(a, c, b);
                 self.link(p, n);
                 self.link(n, qq);
             }
             END => {
-                self.active[p as usize] = false;
-                self.active[q as usize] = false;
-                let (pp, qq) = (self.prev[p as usize], self.next[q as usize]);
+                self.edges[p as usize].active = false;
+                self.edges[q as usize].active = false;
+                let (pp, qq) = (self.edges[p as usize].prev, self.edges[q as usize].next);
                 self.link(pp, qq);
             }
             _ => {
@@ -251,9 +268,9 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
     {
         return None;
     }
-    // Directed edges `(a, b)` with their triangle, grouped by `a` (a counting sort) and sorted
-    // by `(b, triangle)` within: the triangles across `(a, b)` are the entries `(a, f)` of
-    // vertex `b`, in triangle order.
+    // Directed edges `(a, b)` with their triangle, grouped by `a` (a counting sort, which
+    // leaves each group in triangle order): the triangles across `(a, b)` are the entries
+    // `(a, f)` of vertex `b`, in triangle order.
     let mut start = vec![0u32; n + 1];
     for t in &tris {
         for &v in t {
@@ -271,9 +288,6 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
             edges[*slot as usize] = (t[(k + 1) % 3], f as u32);
             *slot += 1;
         }
-    }
-    for v in 0..n {
-        edges[start[v] as usize..start[v + 1] as usize].sort_unstable();
     }
     let mut visited = vec![false; tris.len()];
     let mut new_of = vec![u32::MAX; n];
@@ -312,7 +326,7 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
         front.start(s);
         while done < tris.len() {
             let Some(e) = front.pop() else { break };
-            let (a, b) = (front.a[e as usize], front.b[e as usize]);
+            let (a, b) = (front.edges[e as usize].a, front.edges[e as usize].b);
             let (oa, ob) = (order[a as usize], order[b as usize]);
             let face = edges[start[ob as usize] as usize..start[ob as usize + 1] as usize]
                 .iter()
@@ -321,7 +335,7 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
                 .find(|&f| !visited[f as usize]);
             let Some(f) = face else {
                 ctx.symbols.put(&mut enc, front.context(e), BOUNDARY);
-                front.active[e as usize] = false;
+                front.edges[e as usize].active = false;
                 continue;
             };
             visited[f as usize] = true;
@@ -338,7 +352,7 @@ pub fn encode(indices: &[u32], n: usize) -> Option<Encoded> {
                 c = order.len() as u32;
                 new_of[oc as usize] = c;
                 order.push(oc);
-                predictions.push(Prediction::Parallelogram(a, b, front.o[e as usize]));
+                predictions.push(Prediction::Parallelogram(a, b, front.edges[e as usize].o));
             } else {
                 c = new_of[oc as usize];
                 symbol = match (front.left_is(e, c), front.right_is(e, c)) {
@@ -396,20 +410,20 @@ pub fn decode(bytes: &[u8], n: usize, t: usize) -> Result<(Vec<u32>, Vec<Predict
             let ei = e as usize;
             let c = match symbol {
                 BOUNDARY => {
-                    front.active[ei] = false;
+                    front.edges[ei].active = false;
                     continue;
                 }
                 VERTEX => {
                     if predictions.len() >= n {
                         return Err(FrontError);
                     }
-                    let (a, b, o) = (front.a[ei], front.b[ei], front.o[ei]);
+                    let (a, b, o) = (front.edges[ei].a, front.edges[ei].b, front.edges[ei].o);
                     predictions.push(Prediction::Parallelogram(a, b, o));
                     (predictions.len() - 1) as u32
                 }
                 LEFT | END => {
-                    let p = front.prev[ei];
-                    let c = front.a[p as usize];
+                    let p = front.edges[ei].prev;
+                    let c = front.edges[p as usize].a;
                     let ok = front.left_is(e, c) && (symbol == LEFT || front.right_is(e, c));
                     if !ok {
                         return Err(FrontError);
@@ -417,8 +431,8 @@ pub fn decode(bytes: &[u8], n: usize, t: usize) -> Result<(Vec<u32>, Vec<Predict
                     c
                 }
                 RIGHT => {
-                    let q = front.next[ei];
-                    let c = front.b[q as usize];
+                    let q = front.edges[ei].next;
+                    let c = front.edges[q as usize].b;
                     if !front.right_is(e, c) {
                         return Err(FrontError);
                     }
@@ -426,7 +440,7 @@ pub fn decode(bytes: &[u8], n: usize, t: usize) -> Result<(Vec<u32>, Vec<Predict
                 }
                 SPLIT => {
                     let c = ctx.get_index(&mut dec, predictions.len())?;
-                    if c == front.a[ei] || c == front.b[ei] {
+                    if c == front.edges[ei].a || c == front.edges[ei].b {
                         return Err(FrontError);
                     }
                     c

@@ -11,6 +11,9 @@ use glam::Vec3;
 
 use super::patch::ByVertex;
 
+/// Triangles whose areas set a grid's cell size.
+const AREA_SAMPLES: usize = 4096;
+
 /// Uniform grid over a triangle set for nearest-surface queries.
 pub struct TriangleGrid<'a> {
     positions: &'a [[f32; 3]],
@@ -32,20 +35,32 @@ impl<'a> TriangleGrid<'a> {
     /// 7–10% less time than with cells of two edges.
     pub fn new(positions: &'a [[f32; 3]], indices: &'a [u32]) -> TriangleGrid<'a> {
         let tri_count = indices.len() / 3;
+        let corners = |t: &[u32]| [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
         let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-        let mut area = 0.0f64;
+        let mut boxes = Vec::with_capacity(tri_count);
         for t in indices.chunks_exact(3) {
-            let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
-            lo = lo.min(a).min(b).min(c);
-            hi = hi.max(a).max(b).max(c);
-            area += (b - a).cross(c - a).length() as f64 * 0.5;
+            let [a, b, c] = corners(t);
+            let (bl, bh) = (a.min(b).min(c), a.max(b).max(c));
+            lo = lo.min(bl);
+            hi = hi.max(bh);
+            boxes.push((bl, bh));
         }
         if tri_count == 0 {
             lo = Vec3::ZERO;
             hi = Vec3::ZERO;
         }
+        // The mean area from a few thousand triangles spread over the set: the cell size
+        // changes only how fast the (exact) search is, and a square root per triangle was a
+        // fifth of the grid's construction.
+        let stride = (tri_count / AREA_SAMPLES).max(1);
+        let (mut area, mut sampled) = (0.0f64, 0usize);
+        for t in indices.chunks_exact(3).step_by(stride) {
+            let [a, b, c] = corners(t);
+            area += (b - a).cross(c - a).length() as f64 * 0.5;
+            sampled += 1;
+        }
         let extent = (hi - lo).max(Vec3::splat(1e-12));
-        let mut cell = (8.0 * (area / tri_count.max(1) as f64).sqrt()) as f32;
+        let mut cell = (8.0 * (area / sampled.max(1) as f64).sqrt()) as f32;
         let max_cells = (tri_count * 16).max(64) as f32;
         if cell.is_nan() || cell <= 0.0 {
             cell = extent.max_element() / 8.0;
@@ -66,13 +81,10 @@ impl<'a> TriangleGrid<'a> {
             dims,
             offsets: Vec::new(),
             items: Vec::new(),
-            boxes: Vec::with_capacity(tri_count),
+            boxes: Vec::new(),
         };
         let mut ranges = Vec::with_capacity(tri_count);
-        for t in indices.chunks_exact(3) {
-            let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
-            let (bl, bh) = (a.min(b).min(c), a.max(b).max(c));
-            grid.boxes.push((bl, bh));
+        for &(bl, bh) in &boxes {
             let (l, h) = (grid.cell_of(bl), grid.cell_of(bh));
             ranges.push((l, h));
             for z in l[2]..=h[2] {
@@ -102,6 +114,7 @@ impl<'a> TriangleGrid<'a> {
         }
         grid.offsets = offsets;
         grid.items = items;
+        grid.boxes = boxes;
         grid
     }
 
@@ -372,26 +385,34 @@ pub fn simplification_distance(
         };
         [t[r], t[(r + 1) % 3], t[(r + 2) % 3]]
     };
-    let unchanged = ByVertex::new(
-        n,
-        input.chunks_exact(3).map(|t| {
-            let [a, b, c] = canonical(t);
-            (a, [b, c])
-        }),
-    );
-    let input_edges = ByVertex::new(
-        n,
-        input
-            .chunks_exact(3)
-            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-            .map(|(u, v)| (u.min(v), u.max(v))),
-    );
+    // A simplified triangle is unchanged when an input triangle at its first corner has its
+    // corners in the same turn; an edge is the input's when an input triangle at one end has
+    // the other: read from `input_at` rather than two more tables of their own.
+    let input_triangle = |g: u32| &input[g as usize * 3..g as usize * 3 + 3];
+    let unchanged = |t: &[u32]| {
+        let key = canonical(t);
+        input_at
+            .of(t[0])
+            .iter()
+            .any(|&g| canonical(input_triangle(g)) == key)
+    };
+    let input_edge = |u: u32, v: u32| {
+        input_at
+            .of(u)
+            .iter()
+            .any(|&g| input_triangle(g).contains(&v))
+    };
     let to_input = TriangleGrid::new(positions, input);
     near = u32::MAX;
-    let mut edges: Vec<(u32, u32)> = Vec::with_capacity(simplified.len());
+    // Whether a simplified triangle has the directed edge `(u, v)`.
+    let simplified_edge = |u: u32, v: u32| {
+        simplified_at.of(u).iter().any(|&g| {
+            let t = &simplified[g as usize * 3..g as usize * 3 + 3];
+            (0..3).any(|k| t[k] == u && t[(k + 1) % 3] == v)
+        })
+    };
     for t in simplified.chunks_exact(3) {
-        let [first, b, c] = canonical(t);
-        if unchanged.contains(first, [b, c]) {
+        if unchanged(t) {
             continue;
         }
         let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
@@ -404,21 +425,19 @@ pub fn simplification_distance(
             around,
             worst,
         ));
+        // Each new edge once: from the triangle where it runs upwards, or from its only one
+        // (an edge whose reverse is in an unchanged triangle is the input's). Sampled right
+        // after the centroid beside it, the search starts next to its answer.
         for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-            let e = (u.min(v), u.max(v));
-            if !input_edges.contains(e.0, e.1) {
-                edges.push(e);
+            if input_edge(u, v) || (u > v && simplified_edge(v, u)) {
+                continue;
             }
+            let mid = (Vec3::from(positions[u as usize]) + Vec3::from(positions[v as usize])) * 0.5;
+            let around = [u, v]
+                .into_iter()
+                .flat_map(|v| input_at.of(v).iter().copied());
+            worst = worst.max(to_input.distance_above_trying(mid.into(), &mut near, around, worst));
         }
-    }
-    edges.sort_unstable();
-    edges.dedup();
-    for (u, v) in edges {
-        let mid = (Vec3::from(positions[u as usize]) + Vec3::from(positions[v as usize])) * 0.5;
-        let around = [u, v]
-            .into_iter()
-            .flat_map(|v| input_at.of(v).iter().copied());
-        worst = worst.max(to_input.distance_above_trying(mid.into(), &mut near, around, worst));
     }
     worst
 }

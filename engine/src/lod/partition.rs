@@ -14,7 +14,7 @@
 use glam::Vec3;
 use metis::Idx;
 
-use super::patch::{ByVertex, sort_small};
+use super::patch::{ByVertex, half_edge, sort_small};
 
 /// Largest segment of step 1, in triangles.
 const SEGMENT_MAX: usize = 192;
@@ -78,12 +78,13 @@ fn triangle_adjacency(indices: &[u32]) -> Adjacency {
         start[v + 1] += start[v];
     }
     let mut fill = start.clone();
-    let mut half: Vec<(u32, u32)> = vec![(0, 0); indices.len()];
+    // (higher vertex, triangle) as one integer (`half_edge`): one comparison a step.
+    let mut half: Vec<u64> = vec![0; indices.len()];
     for (t, tri) in indices.chunks_exact(3).enumerate() {
         for k in 0..3 {
             let (a, b) = (tri[k], tri[(k + 1) % 3]);
             let slot = &mut fill[a.min(b) as usize];
-            half[*slot as usize] = (a.max(b), t as u32);
+            half[*slot as usize] = half_edge(a.max(b), t as u32);
             *slot += 1;
         }
     }
@@ -92,12 +93,13 @@ fn triangle_adjacency(indices: &[u32]) -> Adjacency {
     for lo in 0..n {
         let around = &mut half[start[lo] as usize..start[lo + 1] as usize];
         sort_small(around);
-        for users in around.chunk_by(|x, y| x.0 == y.0) {
+        for users in around.chunk_by(|x, y| x >> 32 == y >> 32) {
             for w in users.windows(2) {
-                if w[0].1 != w[1].1 {
-                    pairs.push((w[0].1, w[1].1));
-                    degree[w[0].1 as usize] += 1;
-                    degree[w[1].1 as usize] += 1;
+                let (f, g) = (w[0] as u32, w[1] as u32);
+                if f != g {
+                    pairs.push((f, g));
+                    degree[f as usize] += 1;
+                    degree[g as usize] += 1;
                 }
             }
         }

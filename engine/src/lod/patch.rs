@@ -126,6 +126,13 @@ pub fn edge_runs(indices: &[u32], n: usize, skip_degenerate: bool) -> Vec<(u64, 
     out
 }
 
+/// A half-edge's higher end and its triangle as one integer, ordered as the pair
+/// `(higher, triangle)`: the small per-vertex sorts compare one integer instead of a tuple.
+#[inline]
+pub fn half_edge(higher: u32, triangle: u32) -> u64 {
+    ((higher as u64) << 32) | triangle as u64
+}
+
 /// Sorts a short slice (a vertex's few edges) by insertion, inline, and a longer one by the
 /// standard sort: the standard sort's call for each of a mesh's vertices cost more than the
 /// sorting (1% of a build). For element types whose equal values are identical (integers and
@@ -190,10 +197,6 @@ impl<T: Copy + Default + PartialEq> ByVertex<T> {
         } else {
             &mut []
         }
-    }
-
-    pub(crate) fn contains(&self, v: u32, item: T) -> bool {
-        self.of(v).contains(&item)
     }
 }
 

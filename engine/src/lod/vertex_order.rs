@@ -408,7 +408,7 @@ mod tests {
             for _ in 0..60 {
                 let p = [0, 1, 2].map(|k| centre[k] + (next() % 200) as f32 * 0.01);
                 positions.push(p);
-                if next() % 5 == 0 {
+                if next().is_multiple_of(5) {
                     positions.push(p);
                 }
             }
