@@ -164,8 +164,23 @@ pub fn oct_decode(q: [i64; 2]) -> [f32; 3] {
 /// integer vectors below 2^26 are exact, and the summation order is the triangle order, so
 /// the result is bit-identical in any IEEE-754 implementation that follows this order.
 pub fn grid_normals(positions: &[[i64; 3]], indices: &[u32]) -> Vec<[f64; 3]> {
+    grid_normals_of(positions, indices, None)
+}
+
+/// [`grid_normals`] of the vertices `wanted` marks (the others are left unspecified): the
+/// same sums in the same order, over the triangles that touch one. The encoder stores the
+/// normals of border vertices only.
+fn grid_normals_of(
+    positions: &[[i64; 3]],
+    indices: &[u32],
+    wanted: Option<&[bool]>,
+) -> Vec<[f64; 3]> {
     let mut acc = vec![[0f64; 3]; positions.len()];
+    let wanted_at = |i: u32| wanted.is_none_or(|w| w.get(i as usize).copied().unwrap_or(false));
     for t in indices.chunks_exact(3) {
+        if wanted.is_some() && !t.iter().any(|&i| wanted_at(i)) {
+            continue;
+        }
         let [a, b, c] = [t[0], t[1], t[2]].map(|i| positions[i as usize].map(|v| v as f64));
         let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
         let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
@@ -181,7 +196,10 @@ pub fn grid_normals(positions: &[[i64; 3]], indices: &[u32]) -> Vec<[f64; 3]> {
             s[2] += n[2];
         }
     }
-    for n in &mut acc {
+    for (v, n) in acc.iter_mut().enumerate() {
+        if !wanted_at(v as u32) {
+            continue;
+        }
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
         *n = if len > 0.0 {
             [n[0] / len, n[1] / len, n[2] / len]
@@ -942,7 +960,7 @@ fn encode_split(
     // Copies of a vertex (textured patches) have one scan normal: stored once.
     let normals_by_id = texture.is_some() && normals.is_some();
     if let Some(n) = normals.as_ref() {
-        let predicted = grid_normals(&decoded_pos, &indices);
+        let predicted = grid_normals_of(&decoded_pos, &indices, Some(border));
         let mut sink = Sink::new(v3, NORMAL_CHANNELS);
         let mut stored: HashSet<u32> = HashSet::default();
         for v in (0..used).filter(|&v| border[v]) {
