@@ -6,6 +6,7 @@
 
 use crate::mesh::TexturedFace;
 use glam::Vec3;
+use rayon::prelude::*;
 use std::fs::File;
 use std::io::{self, BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -148,6 +149,7 @@ pub fn write_buckets(
     };
     let mut chunk = vec![[0u32; 3]; 1 << 16];
     let mut uvs = vec![TexturedFace::NONE; if uvs_path.is_some() { chunk.len() } else { 0 }];
+    let mut face_buckets: Vec<u32> = Vec::with_capacity(chunk.len());
     loop {
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut chunk);
         let got = read_full(&mut reader, bytes)?;
@@ -165,13 +167,21 @@ pub fn write_buckets(
                 ));
             }
         }
-        for (i, f) in faces.iter().enumerate() {
-            let c = f
-                .iter()
-                .map(|&i| Vec3::from(positions[i as usize]))
-                .sum::<Vec3>()
-                / 3.0;
-            let b = split.bucket_of(c) as usize;
+        // Each face's bucket, on every core of the build's pool (reading three scattered
+        // vertices a face is most of this pass), then the faces to their files in order.
+        faces
+            .par_iter()
+            .map(|f| {
+                let c = f
+                    .iter()
+                    .map(|&i| Vec3::from(positions[i as usize]))
+                    .sum::<Vec3>()
+                    / 3.0;
+                split.bucket_of(c)
+            })
+            .collect_into_vec(&mut face_buckets);
+        for (i, (f, &b)) in faces.iter().zip(&face_buckets).enumerate() {
+            let b = b as usize;
             writers[b].write_all(bytemuck::bytes_of(f))?;
             if let Some(uv) = uvs.get(i) {
                 writers[b].write_all(bytemuck::bytes_of(uv))?;

@@ -127,8 +127,9 @@ struct Binning<'a> {
 
 impl<'a> Binning<'a> {
     fn new(positions: &'a [[f32; 3]], grid: &'a Grid) -> Binning<'a> {
+        use rayon::prelude::*;
         let top = positions
-            .iter()
+            .par_iter()
             .map(|p| grid.quantize(*p).into_iter().max().unwrap_or(0))
             .max()
             .unwrap_or(0);
@@ -204,29 +205,67 @@ fn spilled_order(
 /// a side), those alone are interleaved into a 64-bit code, which orders them as the
 /// comparison does, and the codes are sorted instead of comparing coordinates.
 fn sort_into(positions: &[[f32; 3]], grid: &Grid, slots: &mut [u32]) {
+    use rayon::prelude::*;
     let binning = Binning::new(positions, grid);
-    let mut starts = vec![0usize; (1 << BIN_BITS) + 1];
-    for v in 0..positions.len() {
-        starts[binning.bin(binning.point(v)) + 1] += 1;
-    }
-    for b in 1..starts.len() {
-        starts[b] += starts[b - 1];
-    }
-    let mut next = starts.clone();
-    for v in 0..positions.len() {
-        let b = binning.bin(binning.point(v));
-        slots[next[b]] = v as u32;
-        next[b] += 1;
-    }
-    let mut bins: Vec<&mut [u32]> = Vec::with_capacity(1 << BIN_BITS);
-    let mut rest = slots;
-    for w in starts.windows(2) {
-        let (bin, after) = rest.split_at_mut(w[1] - w[0]);
-        if bin.len() > 1 {
-            bins.push(bin);
+    let bin_count = 1usize << BIN_BITS;
+    // The counting sort in consecutive runs of vertices, on the pool's threads: each run
+    // counts its bins, then scatters into its own share of every bin (the runs' shares in
+    // run order), so each bin lists its vertices by index, as one pass over all would.
+    let runs = rayon::current_num_threads().clamp(1, 8);
+    let run_len = positions.len().div_ceil(runs).max(1);
+    let ranges: Vec<std::ops::Range<usize>> = (0..positions.len())
+        .step_by(run_len)
+        .map(|a| a..(a + run_len).min(positions.len()))
+        .collect();
+    let counts: Vec<Vec<usize>> = ranges
+        .par_iter()
+        .map(|r| {
+            let mut c = vec![0usize; bin_count];
+            for v in r.clone() {
+                c[binning.bin(binning.point(v))] += 1;
+            }
+            c
+        })
+        .collect();
+    // Every run's share of every bin, cut off the slots in bin order, then run order.
+    let mut shares: Vec<Vec<&mut [u32]>> = ranges.iter().map(|_| Vec::new()).collect();
+    let mut bins: Vec<std::ops::Range<usize>> = Vec::with_capacity(bin_count);
+    let mut rest = &mut slots[..];
+    let mut at = 0usize;
+    for b in 0..bin_count {
+        let start = at;
+        for (share, count) in shares.iter_mut().zip(counts.iter().map(|c| c[b])) {
+            let (mine, after) = std::mem::take(&mut rest).split_at_mut(count);
+            share.push(mine);
+            rest = after;
+            at += count;
         }
-        rest = after;
+        if at - start > 1 {
+            bins.push(start..at);
+        }
     }
+    ranges
+        .into_par_iter()
+        .zip(shares.into_par_iter())
+        .for_each(|(r, mut share)| {
+            let mut next = vec![0usize; bin_count];
+            for v in r {
+                let b = binning.bin(binning.point(v));
+                share[b][next[b]] = v as u32;
+                next[b] += 1;
+            }
+        });
+    let mut bins_out: Vec<&mut [u32]> = Vec::with_capacity(bins.len());
+    let mut rest = slots;
+    let mut at = 0usize;
+    for r in bins {
+        let (_, tail) = rest.split_at_mut(r.start - at);
+        let (bin, after) = tail.split_at_mut(r.end - r.start);
+        bins_out.push(bin);
+        rest = after;
+        at = r.end;
+    }
+    let bins = bins_out;
     if binning.shift <= super::build::MORTON_BITS {
         let mask = (1u32 << binning.shift) - 1;
         sort_bins(
@@ -300,20 +339,23 @@ fn invert_into(order: &[u32], new_of: &mut [u32]) {
 }
 
 /// `values` in the new order, in a fresh spilled array.
-fn permuted<T: bytemuck::Pod>(
+fn permuted<T: bytemuck::Pod + Send + Sync>(
     values: &SpillVec<T>,
     order: &[u32],
     dir: &Path,
     name: &str,
     memory_limit: usize,
 ) -> io::Result<SpillVec<T>> {
-    const CHUNK: usize = 1 << 16;
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 18;
     let source = values.as_slice();
     let mut out = SpillVec::new(dir.join(format!("{name}-renumbered.bin")), memory_limit);
     let mut chunk = Vec::with_capacity(CHUNK);
     for part in order.chunks(CHUNK) {
-        chunk.clear();
-        chunk.extend(part.iter().map(|&old| source[old as usize]));
+        // Gathered on the pool's threads (scattered reads), appended in order.
+        part.par_iter()
+            .map(|&old| source[old as usize])
+            .collect_into_vec(&mut chunk);
         out.extend_from_slice(&chunk)?;
     }
     values.release();
@@ -323,6 +365,7 @@ fn permuted<T: bytemuck::Pod>(
 
 /// Rewrites the face file (`[u32; 3]` a triangle) with every index through `new_of`.
 fn remap_faces(from: &Path, to: &Path, new_of: &[u32]) -> io::Result<()> {
+    use rayon::prelude::*;
     let mut reader = BufReader::with_capacity(1 << 20, File::open(from)?);
     let mut writer = BufWriter::with_capacity(1 << 20, File::create(to)?);
     let mut buf = vec![0u8; 12 << 14];
@@ -338,14 +381,19 @@ fn remap_faces(from: &Path, to: &Path, new_of: &[u32]) -> io::Result<()> {
         if filled % 4 != 0 {
             return Err(io::Error::other("the face file ends inside an index"));
         }
-        for word in buf[..filled].chunks_exact_mut(4) {
-            let old = u32::from_ne_bytes([word[0], word[1], word[2], word[3]]);
-            let new = new_of
-                .get(old as usize)
-                .copied()
-                .ok_or_else(|| io::Error::other("the face file names a vertex out of range"))?;
-            word.copy_from_slice(&new.to_ne_bytes());
-        }
+        // On the pool's threads, in runs of 4096 indices.
+        buf[..filled]
+            .par_chunks_mut(4 << 12)
+            .try_for_each(|words| {
+                for word in words.chunks_exact_mut(4) {
+                    let old = u32::from_ne_bytes([word[0], word[1], word[2], word[3]]);
+                    let new = new_of.get(old as usize).copied().ok_or_else(|| {
+                        io::Error::other("the face file names a vertex out of range")
+                    })?;
+                    word.copy_from_slice(&new.to_ne_bytes());
+                }
+                Ok::<(), io::Error>(())
+            })?;
         writer.write_all(&buf[..filled])?;
         if filled < buf.len() {
             break;
