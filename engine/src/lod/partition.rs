@@ -415,6 +415,22 @@ fn spatial_split(graph: &Graph, nodes: &[u32], parts: usize) -> Vec<Idx> {
 
 /// Renumbers labels densely in order of first appearance; returns the label count.
 fn compact_labels(labels: &mut [u32]) -> usize {
+    // Labels are parts (a few per thousand triangles): a table indexed by label, where the
+    // largest is not far beyond the count, instead of hashing every triangle's.
+    let top = labels.iter().copied().max().map_or(0, |m| m as usize + 1);
+    if top <= labels.len() + 1024 {
+        let mut new_of = vec![u32::MAX; top];
+        let mut count = 0u32;
+        for l in labels.iter_mut() {
+            let slot = &mut new_of[*l as usize];
+            if *slot == u32::MAX {
+                *slot = count;
+                count += 1;
+            }
+            *l = *slot;
+        }
+        return count as usize;
+    }
     let mut map = rustc_hash::FxHashMap::default();
     for l in labels.iter_mut() {
         let next = map.len() as u32;
@@ -426,6 +442,33 @@ fn compact_labels(labels: &mut [u32]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Both paths of the relabelling (a table for small labels, a map for spread ones) number
+    /// labels densely in order of first appearance.
+    #[test]
+    fn compact_labels_numbers_by_first_appearance_on_both_paths() {
+        let mut next = crate::testing::xorshift(0x9e37_79b9);
+        let labels: Vec<u32> = (0..5000).map(|_| next() % 300).collect();
+        let mut first_seen: Vec<u32> = Vec::new();
+        let expected: Vec<u32> = labels
+            .iter()
+            .map(|l| match first_seen.iter().position(|x| x == l) {
+                Some(k) => k as u32,
+                None => {
+                    first_seen.push(*l);
+                    (first_seen.len() - 1) as u32
+                }
+            })
+            .collect();
+        let mut small = labels.clone();
+        assert_eq!(compact_labels(&mut small), first_seen.len());
+        assert_eq!(small, expected);
+        // Spread far beyond the count: the map's path.
+        let mut spread: Vec<u32> = labels.iter().map(|&l| l * 10_000_000).collect();
+        assert_eq!(compact_labels(&mut spread), first_seen.len());
+        assert_eq!(spread, expected);
+        assert_eq!(compact_labels(&mut []), 0);
+    }
 
     /// The counting sort links the same neighbours in the same order as sorting every
     /// (edge key, triangle) pair, also across a non-manifold edge and a repeated triangle.

@@ -270,10 +270,17 @@ fn distinct_positions(positions: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<bool>) {
     let mut out = Vec::with_capacity(positions.len());
     for (i, p) in positions.iter().enumerate() {
         let original = p.map(f32::to_bits);
-        if let Some(&twin) = first.get(&original) {
-            coincident[twin] = true;
-            coincident[i] = true;
-        }
+        // One lookup for the usual distinct point.
+        let twin = match first.entry(original) {
+            std::collections::hash_map::Entry::Vacant(slot) => {
+                slot.insert(i);
+                out.push(*p);
+                continue;
+            }
+            std::collections::hash_map::Entry::Occupied(slot) => *slot.get(),
+        };
+        coincident[twin] = true;
+        coincident[i] = true;
         let mut key = original;
         while first.contains_key(&key) {
             key[0] = f32::from_bits(key[0]).next_up().to_bits();
