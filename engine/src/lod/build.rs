@@ -787,8 +787,13 @@ impl<'a> Builder<'a> {
             .build()
             .map_err(|e| BuildError::Io(io::Error::other(e.to_string())))?;
         let results: Vec<Result<Vec<Stored>, BuildError>> = workers.install(|| {
+            // One job a bucket (and below, a group), so an idle thread can take any that
+            // is left: rayon otherwise folds a run of them on one thread once it stops
+            // splitting, and at the end of the leaves and of the first level one core sat idle
+            // for a quarter to a third of a second while the other worked through such a run.
             buckets
                 .par_iter()
+                .with_max_len(1)
                 .enumerate()
                 .map(|(index, bucket)| {
                     if this.progress.cancelled() {
@@ -891,6 +896,7 @@ impl<'a> Builder<'a> {
             let uses = &uses;
             let results: Vec<Result<GroupOutcome, BuildError>> = grouping
                 .par_iter()
+                .with_max_len(1)
                 .map(|members| {
                     if this.progress.cancelled() {
                         return Err(BuildError::Cancelled);
