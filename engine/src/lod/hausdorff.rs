@@ -219,7 +219,17 @@ impl<'a> TriangleGrid<'a> {
             false
         };
         for t in candidates.into_iter().chain(std::iter::once(*near)) {
-            if (t as usize) < self.boxes.len() && consider(t, &mut best_sq, &mut best) {
+            // A triangle whose box is no nearer than the best so far cannot be nearer itself
+            // (the grid's test below; the neighbours tried here often repeat or lie beyond).
+            let Some(&(lo, hi)) = self.boxes.get(t as usize) else {
+                continue;
+            };
+            if best_sq != f32::MAX
+                && (lo - p).max(p - hi).max(Vec3::ZERO).length_squared() >= best_sq
+            {
+                continue;
+            }
+            if consider(t, &mut best_sq, &mut best) {
                 *near = best;
                 return best_sq.sqrt();
             }
