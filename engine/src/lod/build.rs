@@ -648,7 +648,8 @@ impl<'a> Builder<'a> {
             shift,
             texture: texture.map(|t| (&t.uvs[..], &[][..])),
         };
-        let (blob, encoded_vertices) = codec::encode_counted(&patch_ref, self.options.zstd_level);
+        let (blob, encoded_vertices, border) =
+            codec::encode_with_border(&patch_ref, self.options.zstd_level);
         let encoded_vertices = encoded_vertices as u32;
         let blob_offset = self.blobs.append(&blob)?;
         Ok(Stored {
@@ -661,7 +662,7 @@ impl<'a> Builder<'a> {
             vertices: patch.ids.len() as u32,
             bounds: sphere_of_points(patch.positions.iter()),
             cone: normal_cone(&patch.positions, &patch.indices),
-            outline: outline(patch),
+            outline: outline(patch, border.as_deref()),
             tex_offset,
             tex_len,
             encoded_vertices,
@@ -1616,13 +1617,24 @@ fn place(from: &Path, to: &Path) -> io::Result<()> {
     })
 }
 
-/// Border vertices (or a few samples when there is no border) for grouping.
-fn outline(patch: &BuildPatch) -> PatchOutline {
-    let mut on_border = vec![false; patch.ids.len()];
-    for (a, b) in patch.local_border_edges() {
-        on_border[a as usize] = true;
-        on_border[b as usize] = true;
-    }
+/// Border vertices (or a few samples when there is no border) for grouping; `border` marks
+/// them where the encoder found them already (the same vertices: debug builds check).
+fn outline(patch: &BuildPatch, border: Option<&[bool]>) -> PatchOutline {
+    let counted = || {
+        let mut on_border = vec![false; patch.ids.len()];
+        for (a, b) in patch.local_border_edges() {
+            on_border[a as usize] = true;
+            on_border[b as usize] = true;
+        }
+        on_border
+    };
+    let on_border: std::borrow::Cow<'_, [bool]> = match border {
+        Some(b) => {
+            debug_assert_eq!(b, &counted()[..], "the encoder's border is the patch's");
+            b.into()
+        }
+        None => counted().into(),
+    };
     let mut points: Vec<(u32, [f32; 3])> = on_border
         .iter()
         .enumerate()

@@ -527,13 +527,29 @@ pub fn encode_counted(patch: &PatchRef<'_>, zstd_level: i32) -> (Vec<u8>, usize)
     encode_layout(patch, zstd_level, Layout::Front)
 }
 
+/// [`encode_counted`], with which of the patch's vertices lie on its border (an edge of one
+/// triangle), which the encoder finds anyway; `None` for a textured patch (it encodes one
+/// vertex per texture coordinate, whose chart seams are borders too).
+pub fn encode_with_border(
+    patch: &PatchRef<'_>,
+    zstd_level: i32,
+) -> (Vec<u8>, usize, Option<Vec<bool>>) {
+    if patch.texture.is_some() {
+        let (blob, used) = encode_layout(patch, zstd_level, Layout::Front);
+        return (blob, used, None);
+    }
+    let (blob, used, border) = encode_split(patch, None, zstd_level, Layout::Front);
+    (blob, used, Some(border))
+}
+
 /// [`encode_counted`] in a chosen layout.
 pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (Vec<u8>, usize) {
     let Some((corner_uvs, image)) = patch.texture else {
-        return encode_split(patch, None, zstd_level, layout);
+        let (blob, used, _) = encode_split(patch, None, zstd_level, layout);
+        return (blob, used);
     };
     let (grid, colors, normals, ids, indices, uvs) = split_wedges(patch, corner_uvs);
-    encode_split(
+    let (blob, used, _) = encode_split(
         &PatchRef {
             grid_positions: &grid,
             colors: colors.as_deref(),
@@ -546,7 +562,8 @@ pub fn encode_layout(patch: &PatchRef<'_>, zstd_level: i32, layout: Layout) -> (
         Some((&uvs, image)),
         zstd_level,
         layout,
-    )
+    );
+    (blob, used)
 }
 
 /// Residual channels of `MWP3` (`docs/FORMAT.md` "Range coding"): positions by axis, by
@@ -763,13 +780,14 @@ fn morton_sequence(points: &[[u32; 3]]) -> Vec<u32> {
     sequence
 }
 
-/// [`encode`] of a patch whose vertices are already one per texture coordinate (`uvs[v]`).
+/// [`encode`] of a patch whose vertices are already one per texture coordinate (`uvs[v]`);
+/// with the blob's vertex count and which of the patch's vertices are on its border.
 fn encode_split(
     patch: &PatchRef<'_>,
     texture: Option<(&[[u16; 2]], &[u8])>,
     zstd_level: i32,
     layout: Layout,
-) -> (Vec<u8>, usize) {
+) -> (Vec<u8>, usize, Vec<bool>) {
     let vertex_count = patch.grid_positions.len();
     let front = match layout {
         Layout::Front => frontcoder::encode(patch.indices, vertex_count),
@@ -1078,7 +1096,13 @@ fn encode_split(
         !v3 || decodes_back(&blob, &indices, &decoded_pos, min, &ids),
         "an MWP3 patch whose connectivity reads back does not decode back whole"
     );
-    (blob, used)
+    let mut patch_border = vec![false; patch.grid_positions.len()];
+    for (&old, &on) in order.iter().zip(border) {
+        if on {
+            patch_border[old as usize] = true;
+        }
+    }
+    (blob, used, patch_border)
 }
 
 /// Appends the image sections to a blob header (12 bytes, flags at byte 5 set here). A WebP
