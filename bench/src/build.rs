@@ -49,6 +49,11 @@ pub struct Args {
     /// the order costs the format.
     #[arg(long, default_value_t = VertexOrder::Morton)]
     pub vertex_order: VertexOrder,
+    /// Alternating rounds of both builds (meshwiki, nxsbuild, meshwiki, ...): with more than
+    /// one, the ratios of every round and their median are printed as well, since other work
+    /// on a shared machine moves either build's times by 10% or more from one run to the next.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub rounds: u32,
 }
 
 /// One reference measurement of `nxsbuild`.
@@ -255,7 +260,12 @@ fn bench(args: &Args) -> anyhow::Result<()> {
                 tools.display()
             );
             match nexus::run(&tools, &input, &dir) {
-                Ok(nx) => side_by_side(&ours, &nx),
+                Ok(nx) => {
+                    side_by_side(&ours, &nx);
+                    if args.rounds > 1 {
+                        rounds(args, &input, &output, &options, &tools, &dir, (ours, nx))?;
+                    }
+                }
                 Err(e) => {
                     println!("  nxsbuild did not run: {e:#}");
                     compare_fixed(
@@ -293,6 +303,85 @@ fn bench(args: &Args) -> anyhow::Result<()> {
     if args.out.is_some() {
         println!("LOD file kept at {}", output.display());
     }
+    Ok(())
+}
+
+/// Rounds 2.. of `--rounds`: each builds with meshwiki, then with nxsbuild (+ nxscompress), as
+/// the first did; prints every round's times and ratios, then the medians.
+fn rounds(
+    args: &Args,
+    input: &Path,
+    output: &Path,
+    options: &BuildOptions,
+    tools: &Path,
+    dir: &Path,
+    first: (Measured, nexus::Run),
+) -> anyhow::Result<()> {
+    let mut all = vec![first];
+    for _ in 1..args.rounds {
+        let bar = Bar::new();
+        bar.0
+            .set_draw_target(indicatif::ProgressDrawTarget::hidden());
+        let cpu_before = nexus::own_cpu_seconds();
+        let report = run_build(&Source::File(input.to_path_buf()), output, options, &bar)
+            .map_err(|e| anyhow::anyhow!("build failed: {e}"))?
+            .report;
+        let cpu = nexus::own_cpu_seconds() - cpu_before;
+        let ours = Measured {
+            wall: report.seconds,
+            cpu,
+            peak: report.peak_rss_bytes,
+            output: report.output_bytes,
+        };
+        let nx = nexus::run(tools, input, dir)?;
+        all.push((ours, nx));
+    }
+    println!(
+        "\n{} alternating rounds (meshwiki, then nxsbuild + nxscompress):",
+        all.len()
+    );
+    println!(
+        "  {:<6} {:>14} {:>14} {:>11} {:>14} {:>14} {:>11}",
+        "round", "nxs wall s", "ours wall s", "wall ratio", "nxs CPU s", "ours CPU s", "CPU ratio"
+    );
+    let mut ratios = (Vec::new(), Vec::new());
+    for (i, (ours, nx)) in all.iter().enumerate() {
+        let total = nx.total();
+        let (w, c) = (
+            total.wall / ours.wall.max(1e-9),
+            total.cpu / ours.cpu.max(1e-9),
+        );
+        println!(
+            "  {:<6} {:>14.1} {:>14.1} {:>10.2}× {:>14.1} {:>14.1} {:>10.2}×",
+            i + 1,
+            total.wall,
+            ours.wall,
+            w,
+            total.cpu,
+            ours.cpu,
+            c
+        );
+        ratios.0.push(w);
+        ratios.1.push(c);
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            (v[n / 2 - 1] + v[n / 2]) / 2.0
+        }
+    };
+    println!(
+        "  median ratio: wall {:.2}×, CPU {:.2}× (range {:.2}-{:.2}× and {:.2}-{:.2}×)",
+        median(&mut ratios.0),
+        median(&mut ratios.1),
+        ratios.0[0],
+        ratios.0[ratios.0.len() - 1],
+        ratios.1[0],
+        ratios.1[ratios.1.len() - 1]
+    );
     Ok(())
 }
 
