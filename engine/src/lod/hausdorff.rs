@@ -83,10 +83,10 @@ impl<'a> TriangleGrid<'a> {
             items: Vec::new(),
             boxes: Vec::new(),
         };
-        let mut ranges = Vec::with_capacity(tri_count);
+        // The cells of each box are found again when filling rather than kept: a list of them
+        // (24 bytes a triangle, written and read once) cost more than finding them twice.
         for &(bl, bh) in &boxes {
             let (l, h) = (grid.cell_of(bl), grid.cell_of(bh));
-            ranges.push((l, h));
             for z in l[2]..=h[2] {
                 for y in l[1]..=h[1] {
                     for x in l[0]..=h[0] {
@@ -101,7 +101,8 @@ impl<'a> TriangleGrid<'a> {
         }
         let mut fill = offsets.clone();
         let mut items = vec![0u32; offsets[cell_count] as usize];
-        for (t, (l, h)) in ranges.into_iter().enumerate() {
+        for (t, &(bl, bh)) in boxes.iter().enumerate() {
+            let (l, h) = (grid.cell_of(bl), grid.cell_of(bh));
             for z in l[2]..=h[2] {
                 for y in l[1]..=h[1] {
                     for x in l[0]..=h[0] {
