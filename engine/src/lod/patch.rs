@@ -164,20 +164,23 @@ pub(crate) struct ByVertex<T> {
 
 impl<T: Copy + Default + PartialEq> ByVertex<T> {
     pub(crate) fn new(n: usize, entries: impl Iterator<Item = (u32, T)> + Clone) -> ByVertex<T> {
+        // `for_each` rather than `for`: callers pass flattened iterators (a triangle's
+        // neighbours per triangle), which iterate internally as nested loops, where `next`
+        // re-enters the flattening at each item (2% of a build, in the partition's links).
         let mut start = vec![0u32; n + 1];
-        for (v, _) in entries.clone() {
-            start[v as usize + 1] += 1;
-        }
+        entries
+            .clone()
+            .for_each(|(v, _)| start[v as usize + 1] += 1);
         for v in 0..n {
             start[v + 1] += start[v];
         }
         let mut fill = start.clone();
         let mut items = vec![T::default(); start[n] as usize];
-        for (v, item) in entries {
+        entries.for_each(|(v, item)| {
             let slot = &mut fill[v as usize];
             items[*slot as usize] = item;
             *slot += 1;
-        }
+        });
         ByVertex { start, items }
     }
 
