@@ -14,7 +14,7 @@
 use glam::Vec3;
 use metis::Idx;
 
-use super::patch::{ByVertex, half_edge, sort_small};
+use super::patch::{ByVertex, edge_users, sort_small};
 
 /// Largest segment of step 1, in triangles.
 const SEGMENT_MAX: usize = 192;
@@ -63,36 +63,13 @@ struct Adjacency {
 
 fn triangle_adjacency(indices: &[u32]) -> Adjacency {
     let tri_count = indices.len() / 3;
-    // The users of each edge, grouped by a counting sort on the edge's lower vertex and a
-    // small sort of that vertex's (higher vertex, triangle) pairs: the same groups, in the
-    // same order (by edge key, then triangle), as sorting every (key, triangle) pair, in
-    // linear time.
-    let n = indices.iter().max().map_or(0, |&m| m as usize + 1);
-    let mut start = vec![0u32; n + 1];
-    for tri in indices.chunks_exact(3) {
-        for k in 0..3 {
-            start[tri[k].min(tri[(k + 1) % 3]) as usize + 1] += 1;
-        }
-    }
-    for v in 0..n {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    // (higher vertex, triangle) as one integer (`half_edge`): one comparison a step.
-    let mut half: Vec<u64> = vec![0; indices.len()];
-    for (t, tri) in indices.chunks_exact(3).enumerate() {
-        for k in 0..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            let slot = &mut fill[a.min(b) as usize];
-            half[*slot as usize] = half_edge(a.max(b), t as u32);
-            *slot += 1;
-        }
-    }
+    // The users of each edge, each a run in triangle order.
+    let (start, half) = edge_users(indices);
+    let n = start.len() - 1;
     let mut degree = vec![0u32; tri_count + 1];
     let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(tri_count * 3 / 2);
     for lo in 0..n {
-        let around = &mut half[start[lo] as usize..start[lo + 1] as usize];
-        sort_small(around);
+        let around = &half[start[lo] as usize..start[lo + 1] as usize];
         for users in around.chunk_by(|x, y| x >> 32 == y >> 32) {
             for w in users.windows(2) {
                 let (f, g) = (w[0] as u32, w[1] as u32);

@@ -133,6 +133,39 @@ pub fn half_edge(higher: u32, triangle: u32) -> u64 {
     ((higher as u64) << 32) | triangle as u64
 }
 
+/// The users of each edge of `indices`: every triangle's edges as [`half_edge`]`(higher end,
+/// triangle)`, grouped by lower end (group `v` is `half[start[v]..start[v + 1]]`, for every
+/// `v` up to the largest index) and each group sorted, so an edge's users are a run in
+/// triangle order (`group.chunk_by(|p, q| p >> 32 == q >> 32)`). The same runs, in the same
+/// order, as sorting every (edge key, triangle) pair, in linear time: a counting sort on the
+/// lower end and a small sort of each vertex's few half-edges. Returns `(start, half)`.
+pub fn edge_users(indices: &[u32]) -> (Vec<u32>, Vec<u64>) {
+    let n = indices.iter().max().map_or(0, |&m| m as usize + 1);
+    let mut start = vec![0u32; n + 1];
+    for t in indices.chunks_exact(3) {
+        for k in 0..3 {
+            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut half: Vec<u64> = vec![0; indices.len() / 3 * 3];
+    for (f, t) in indices.chunks_exact(3).enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let slot = &mut fill[a.min(b) as usize];
+            half[*slot as usize] = half_edge(a.max(b), f as u32);
+            *slot += 1;
+        }
+    }
+    for v in 0..n {
+        sort_small(&mut half[start[v] as usize..start[v + 1] as usize]);
+    }
+    (start, half)
+}
+
 /// Sorts a short slice (a vertex's few edges) by insertion, inline, and a longer one by the
 /// standard sort: the standard sort's call for each of a mesh's vertices cost more than the
 /// sorting (1% of a build). For element types whose equal values are identical (integers and
