@@ -60,6 +60,13 @@ const RATES: [u8; 8] = {
     rates
 };
 
+/// `if_one` where `mask` is all ones, `if_zero` where it is zero: a choice on a coded bit
+/// without a branch (`mask` is `0u32.wrapping_sub(bit as u32)`).
+#[inline(always)]
+fn select(mask: u32, if_one: u32, if_zero: u32) -> u32 {
+    (if_one & mask) | (if_zero & !mask)
+}
+
 impl Bit {
     /// Moves the probability towards `bit`. Without branches: the coded bits are what the
     /// coder cannot predict, so a branch on them is mispredicted about as often as they carry
@@ -71,7 +78,7 @@ impl Bit {
         let up = p + ((PROB_ONE - p) >> rate);
         let down = p - (p >> rate);
         let one = 0u32.wrapping_sub(bit as u32);
-        self.p = ((down & one) | (up & !one)) as u16;
+        self.p = select(one, down, up) as u16;
         self.seen += (self.seen < 7) as u8;
     }
 }
@@ -138,7 +145,7 @@ impl Encoder {
         let bound = (self.range >> PROB_BITS) * p.p as u32;
         let one = 0u32.wrapping_sub(bit as u32);
         self.low += (bound & one) as u64;
-        self.range = ((self.range - bound) & one) | (bound & !one);
+        self.range = select(one, self.range - bound, bound);
         p.update(bit);
         if self.range < TOP {
             self.normalize();
@@ -220,17 +227,13 @@ impl<'a> Decoder<'a> {
         self.at > self.bytes.len()
     }
 
+    #[cold]
+    #[inline(never)]
     fn normalize(&mut self) {
         while self.range < TOP {
             self.range <<= 8;
             self.code = (self.code << 8) | self.next_byte() as u32;
         }
-    }
-
-    #[cold]
-    #[inline(never)]
-    fn normalize_cold(&mut self) {
-        self.normalize();
     }
 
     /// Decodes a bit with the adaptive probability `p` (of a 0), updating it; without a
@@ -241,10 +244,10 @@ impl<'a> Decoder<'a> {
         let bit = self.code >= bound;
         let one = 0u32.wrapping_sub(bit as u32);
         self.code -= bound & one;
-        self.range = ((self.range - bound) & one) | (bound & !one);
+        self.range = select(one, self.range - bound, bound);
         p.update(bit);
         if self.range < TOP {
-            self.normalize_cold();
+            self.normalize();
         }
         bit
     }
@@ -257,7 +260,7 @@ impl<'a> Decoder<'a> {
             self.code -= self.range & 0u32.wrapping_sub(bit as u32);
             value = (value << 1) | bit as u64;
             if self.range < TOP {
-                self.normalize_cold();
+                self.normalize();
             }
         }
         value

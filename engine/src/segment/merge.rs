@@ -177,7 +177,7 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
 
 /// A live segment's neighbours and the boundaries shared with them, in a list: a surface's
 /// segments have about six neighbours whatever their scale, so a scan of the list finds one
-/// sooner than a hash table does (the merge's lookups, removals and insertions were a quarter
+/// sooner than a hash table does (the merge's lookups, removals and insertions were a fifth
 /// of its time with one). Order does not matter: every use sorts or takes one entry.
 #[derive(Debug, Clone, Default)]
 struct Neighbours(Vec<(u32, Boundary)>);
