@@ -83,9 +83,24 @@ impl<'a> TriangleGrid<'a> {
             items: Vec::new(),
             boxes: Vec::new(),
         };
-        // The cells of each box are found again when filling rather than kept: a list of them
-        // (24 bytes a triangle, written and read once) cost more than finding them twice.
+        // A triangle no wider than a cell is listed once, in the cell of its box's centre (a
+        // loose grid: its box then lies within that cell grown by half a cell on every side,
+        // which the search allows for); a wider one in every cell its box meets. Most
+        // triangles are far smaller than a cell: one cell each instead of the two to eight
+        // their boxes meet, found with one lookup instead of two, made the grid's
+        // construction half as costly: the distance's share of the build went from 14.4% to
+        // 12.5% on the 5M relief and from 19.8% to 17.7% on the dragon (perf samples; cells
+        // of 4 or 11 √(mean area) were slower). `home` keeps each triangle's cell for the
+        // second pass (`u32::MAX`: a wide one).
+        let mut home = Vec::with_capacity(tri_count);
         for &(bl, bh) in &boxes {
+            if (bh - bl).max_element() <= cell {
+                let c = grid.index(grid.cell_of((bl + bh) * 0.5)) as u32;
+                counts[c as usize] += 1;
+                home.push(c);
+                continue;
+            }
+            home.push(u32::MAX);
             let (l, h) = (grid.cell_of(bl), grid.cell_of(bh));
             for z in l[2]..=h[2] {
                 for y in l[1]..=h[1] {
@@ -101,7 +116,12 @@ impl<'a> TriangleGrid<'a> {
         }
         let mut fill = offsets.clone();
         let mut items = vec![0u32; offsets[cell_count] as usize];
-        for (t, &(bl, bh)) in boxes.iter().enumerate() {
+        for (t, (&(bl, bh), &c)) in boxes.iter().zip(&home).enumerate() {
+            if c != u32::MAX {
+                items[fill[c as usize] as usize] = t as u32;
+                fill[c as usize] += 1;
+                continue;
+            }
             let (l, h) = (grid.cell_of(bl), grid.cell_of(bh));
             for z in l[2]..=h[2] {
                 for y in l[1]..=h[1] {
@@ -157,10 +177,12 @@ impl<'a> TriangleGrid<'a> {
         }
     }
 
-    /// Squared distance from `p` to the box of cell `c`.
+    /// Squared distance from `p` to the box of cell `c` grown by half a cell on every side:
+    /// every triangle listed in the cell lies within it.
     fn cell_distance_sq(&self, p: Vec3, c: [i32; 3]) -> f32 {
-        let lo = self.origin + Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) * self.cell;
-        let hi = lo + Vec3::splat(self.cell);
+        let lo = self.origin
+            + (Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) - Vec3::splat(0.5)) * self.cell;
+        let hi = lo + Vec3::splat(2.0 * self.cell);
         (lo - p).max(p - hi).max(Vec3::ZERO).length_squared()
     }
 
@@ -279,9 +301,10 @@ impl<'a> TriangleGrid<'a> {
             if within {
                 break;
             }
-            // Anything not yet visited lies beyond the searched cube of cells: at least
-            // `ring + margin` cells away along one axis, and `outside` away from the grid box.
-            let along = (ring as f32 + margin) * self.cell;
+            // Anything not yet visited is listed beyond the searched cube of cells, and lies
+            // within half a cell of its cell: at least `ring + margin - 1/2` cells away along
+            // one axis, and `outside` away from the grid box.
+            let along = (ring as f32 + margin - 0.5).max(0.0) * self.cell;
             if best_sq <= along * along + outside * outside {
                 break;
             }
@@ -493,10 +516,39 @@ mod tests {
                 idx.extend_from_slice(&[i, i + 1, i + n + 2, i, i + n + 2, i + n + 1]);
             }
         }
+        // Triangles far wider than a cell (listed in every cell they meet) among the small
+        // ones (each in the cell of its centre): one across the grid, one standing above it.
+        let wide = pos.len() as u32;
+        pos.extend_from_slice(&[
+            [-0.3, 0.2, 0.35],
+            [1.2, 0.5, 0.3],
+            [0.4, 1.3, 0.4],
+            [0.5, 0.5, -0.6],
+            [0.6, 0.55, 0.9],
+            [0.55, 0.7, 0.2],
+        ]);
+        idx.extend(wide..wide + 6);
         let grid = TriangleGrid::new(&pos, &idx);
-        for k in 0..200 {
+        // Points around the surface, and points on it or just off it (where the nearest
+        // triangle often sits in the next cell: the search must not stop at its own).
+        let small = (n * n * 2) as usize;
+        let points = (0..200).map(|k| {
             let t = k as f32 * 0.618;
-            let p = [t.sin() * 1.5, (t * 0.7).cos() * 1.5, (t * 1.3).sin() * 0.8];
+            [t.sin() * 1.5, (t * 0.7).cos() * 1.5, (t * 1.3).sin() * 0.8]
+        });
+        let on = (0..400).map(|k| {
+            let tri = &idx[(k * 7919 % small) * 3..][..3];
+            let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| Vec3::from(pos[i as usize]));
+            let (u, v) = ((k as f32 * 0.618).fract(), (k as f32 * 0.382).fract());
+            let (u, v) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            let lift = [0.0, 1e-4, -3e-3, 2e-2][k % 4];
+            (a + (b - a) * u + (c - a) * v + Vec3::Z * lift).to_array()
+        });
+        for (k, p) in (0u32..).zip(points.chain(on)) {
             let brute = idx
                 .chunks(3)
                 .map(|tr| {
